@@ -1,0 +1,1 @@
+"""Subcommands of the `cslx` command line, one module each (see `cslx.cli`)."""

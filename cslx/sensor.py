@@ -1,0 +1,292 @@
+"""The cross structured-light sensor: camera + two laser planes + camera-to-robot transform.
+
+Plane i is `a x + b y + c z + 1 = 0` in the camera frame, mm (eq. (1)). Triangulation
+follows DESIGN.md correction 3 (the paper's eq. (27) drops the depth): for the unit ray r
+of an undistorted pixel, the camera-frame point is X_c = −r / (n·r) with n = (a, b, c),
+and the robot-frame point is X_r = R_cr X_c + T_cr.
+
+The calibration file is the JSON of DESIGN.md (Contracts): `image_size` [w, h], `K` 3×3,
+`dist` [k1, k2, p1, p2], `rms_px`, `planes` [[a1,b1,c1],[a2,b2,c2]], `R_cr` 3×3,
+`T_cr` [3], plus optional extras that are kept verbatim.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .camera import Camera, pixel_to_ray
+
+__all__ = [
+    "CalibrationError",
+    "Sensor",
+    "cross_projector_planes",
+    "default_mount",
+    "default_sensor",
+    "load_sensor",
+    "save_sensor",
+    "triangulate",
+    "plane_angle_deg",
+]
+
+#: Table 4 of the paper with v0 corrected (DESIGN.md, correction 2).
+TABLE4_K = ((922.435, 0.0, 329.168), (0.0, 917.356, 270.566), (0.0, 0.0, 1.0))
+TABLE4_DIST = (-0.291459, 0.157027, -1.354e-4, -2.682e-4)
+
+
+class CalibrationError(ValueError):
+    """A calibration file or calibration input that cannot be used, with the reason."""
+
+
+class Sensor(eqx.Module):
+    """Camera, both laser planes and the camera-to-robot rigid transform.
+
+    Attributes:
+        camera: intrinsics and distortion.
+        planes: (2, 3) plane coefficients (a, b, c): plane 0 makes the horizontal stripe
+            (one centre per image column), plane 1 the vertical stripe (one per row).
+        R_cr: (3, 3) rotation camera → robot.
+        T_cr: (3,) translation camera → robot, mm.
+    """
+
+    camera: Camera
+    planes: Float[Array, "2 3"]
+    R_cr: Float[Array, "3 3"]
+    T_cr: Float[Array, 3]
+
+    def to_robot(self, X_c: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
+        """Camera-frame points → robot frame: X_r = R_cr X_c + T_cr."""
+        return X_c @ self.R_cr.T + self.T_cr
+
+    def triangulate(
+        self, uv: Float[Array, "*b 2"], plane: int, *, robot_frame: bool = False
+    ) -> Float[Array, "*b 3"]:
+        """See `triangulate`."""
+        return triangulate(self, uv, plane, robot_frame=robot_frame)
+
+
+def triangulate(
+    sensor: Sensor, uv: Float[Array, "*b 2"], plane: int, *, robot_frame: bool = False
+) -> Float[Array, "*b 3"]:
+    """Intersect the viewing rays of pixels with a laser plane (correction 3 of eq. (27)).
+
+    Args:
+        sensor: the calibrated sensor.
+        uv: distorted pixel coordinates (OpenCV convention); NaN propagates.
+        plane: 0 for the horizontal stripe's plane, 1 for the vertical stripe's.
+        robot_frame: return X_r = R_cr X_c + T_cr instead of the camera-frame point.
+
+    Returns:
+        3-D points in mm. A ray parallel to the plane gives a non-finite value.
+    """
+    ray = pixel_to_ray(uv, sensor.camera, normalize=False)
+    n = sensor.planes[plane].astype(ray.dtype)
+    denom = ray @ n
+    safe = jnp.where(denom == 0, jnp.ones_like(denom), denom)
+    X_c = jnp.where((denom == 0)[..., None], jnp.nan, -ray / safe[..., None])
+    return sensor.to_robot(X_c) if robot_frame else X_c
+
+
+def plane_angle_deg(n1: ArrayLike, n2: ArrayLike) -> float:
+    """Angle between two planes' normals in degrees, in [0, 90]."""
+    n1 = np.asarray(n1, float)
+    n2 = np.asarray(n2, float)
+    c = abs(n1 @ n2) / (np.linalg.norm(n1) * np.linalg.norm(n2))
+    return math.degrees(math.acos(min(1.0, c)))
+
+
+def cross_projector_planes(
+    origin: ArrayLike, target: ArrayLike, roll_deg: float = 0.0
+) -> np.ndarray:
+    """Planes (a, b, c) of an orthogonal cross projector, camera frame.
+
+    The projector sits at `origin` (mm, camera frame) and aims its axis d at `target`. Its
+    two sheets both contain d and are mutually orthogonal: sheet 0 spans d and e_x (the
+    camera x axis made orthogonal to d, rotated by `roll_deg` about d) and therefore draws
+    the horizontal stripe; sheet 1 spans d and e_y = d × e_x and draws the vertical stripe.
+    Neither plane may pass through the camera centre (the a x + b y + c z + 1 = 0 form cannot
+    hold such a plane), which needs an origin off both sheets through the camera axis.
+    """
+    P = np.asarray(origin, float)
+    d = np.asarray(target, float) - P
+    d /= np.linalg.norm(d)
+    ex = np.array([1.0, 0.0, 0.0]) - d[0] * d
+    ex /= np.linalg.norm(ex)
+    ey = np.cross(d, ex)
+    th = math.radians(roll_deg)
+    ex, ey = math.cos(th) * ex + math.sin(th) * ey, -math.sin(th) * ex + math.cos(th) * ey
+    planes = []
+    for n in (ey, ex):  # sheet 0 contains ex, so its normal is ey; sheet 1 the reverse
+        offset = n @ P
+        if abs(offset) < 1e-9:
+            raise CalibrationError("a laser plane passes through the camera centre")
+        planes.append(-n / offset)
+    return np.stack(planes)
+
+
+def default_mount(
+    standoff_mm: float = 230.0, ahead_mm: float = 150.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-robot transform of the default rig: the camera looks straight at the wall.
+
+    Robot frame (DESIGN.md): x_r forward, y_r left, z_r out of the wall. The camera's image
+    u axis points to the robot's right (x_c = −y_r), v axis backwards (y_c = −x_r) and its
+    optical axis into the wall (z_c = −z_r), so the horizontal stripe crosses a weld that
+    runs along the direction of travel. The optical centre is `standoff_mm` above the wall
+    and `ahead_mm` ahead of the robot's reference point.
+    """
+    R_cr = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    T_cr = np.array([ahead_mm, 0.0, standoff_mm])
+    return R_cr, T_cr
+
+
+def default_sensor(dtype=None) -> Sensor:
+    """The rendered rig: Table 4's intrinsics (correction 2) and an orthogonal cross projector.
+
+    Table 4's printed planes are 81° apart, not 89.998° (correction 2), so the renderer gets
+    its own projector: 90 mm off the optical axis along −x and −y of the camera and aimed at
+    the point of the optical axis 230 mm away (the stand-off of the paper's Table 5), which
+    gives a ≈ 21° triangulation angle for each sheet.
+    """
+    R_cr, T_cr = default_mount()
+    planes = cross_projector_planes(origin=(-60.0, -60.0, 0.0), target=(0.0, 0.0, 230.0))
+    return sensor_from_arrays(TABLE4_K, TABLE4_DIST, planes, R_cr, T_cr, (640, 480), dtype=dtype)
+
+
+def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None) -> Sensor:
+    """Build a `Sensor` from plain arrays (no validation; see `load_sensor` for that)."""
+    dtype = dtype or jnp.asarray(0.0).dtype
+    camera = Camera.from_matrix(jnp.asarray(K, dtype), jnp.asarray(dist, dtype), image_size)
+    return Sensor(
+        camera=camera,
+        planes=jnp.asarray(planes, dtype),
+        R_cr=jnp.asarray(R_cr, dtype),
+        T_cr=jnp.asarray(T_cr, dtype),
+    )
+
+
+# ----------------------------------------------------------------------------- file I/O
+
+
+def _array(data: dict, key: str, shape: tuple[int, ...], path: str) -> np.ndarray:
+    if key not in data:
+        raise CalibrationError(f"{path}: missing key {key!r}")
+    try:
+        arr = np.asarray(data[key], dtype=float)
+    except (TypeError, ValueError) as e:
+        raise CalibrationError(f"{path}: {key!r} is not numeric ({e})") from None
+    if arr.shape != shape:
+        raise CalibrationError(f"{path}: {key!r} must have shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CalibrationError(f"{path}: {key!r} holds a non-finite number")
+    return arr
+
+
+def validate_calibration(data: Any, path: str = "<calibration>") -> dict[str, np.ndarray]:
+    """Check a decoded calibration JSON object; return its arrays or raise `CalibrationError`."""
+    if not isinstance(data, dict):
+        raise CalibrationError(f"{path}: the top level must be a JSON object")
+    size = _array(data, "image_size", (2,), path)
+    if np.any(size <= 0) or np.any(size != np.round(size)):
+        raise CalibrationError(f"{path}: 'image_size' must be two positive integers [w, h]")
+    K = _array(data, "K", (3, 3), path)
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise CalibrationError(f"{path}: 'K' focal lengths must be positive")
+    if not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
+        raise CalibrationError(f"{path}: 'K' must be [[fx,0,u0],[0,fy,v0],[0,0,1]]")
+    dist = _array(data, "dist", (4,), path)
+    planes = _array(data, "planes", (2, 3), path)
+    norms = np.linalg.norm(planes, axis=1)
+    if np.any(norms < 1e-12):
+        raise CalibrationError(
+            f"{path}: 'planes' has a zero normal (a plane through the camera centre or at "
+            "infinity cannot be written a x + b y + c z + 1 = 0)"
+        )
+    if np.any(1.0 / norms < 1.0):
+        raise CalibrationError(
+            f"{path}: a laser plane passes within 1 mm of the camera centre "
+            f"(distances {np.round(1.0 / norms, 3).tolist()} mm): it cannot triangulate"
+        )
+    R = _array(data, "R_cr", (3, 3), path)
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise CalibrationError(
+            f"{path}: 'R_cr' is not a proper rotation (RᵀR − I max "
+            f"{np.abs(R.T @ R - np.eye(3)).max():.2e}, det {np.linalg.det(R):.4f})"
+        )
+    T = _array(data, "T_cr", (3,), path)
+    rms = data.get("rms_px", float("nan"))
+    if rms is not None and not isinstance(rms, int | float):
+        raise CalibrationError(f"{path}: 'rms_px' must be a number")
+    return dict(image_size=size.astype(int), K=K, dist=dist, planes=planes, R_cr=R, T_cr=T)
+
+
+def load_sensor(path: str | os.PathLike, dtype=None) -> Sensor:
+    """Read a calibration JSON file (DESIGN.md, Contracts) into a `Sensor`.
+
+    Raises:
+        CalibrationError: unreadable file, invalid JSON, a missing key, a wrong shape, a
+            non-finite number, a plane through the camera centre, or an `R_cr` that is not a
+            rotation; the message names the file and the problem.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except FileNotFoundError:
+        raise CalibrationError(f"{path}: no such calibration file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise CalibrationError(f"{path}: cannot read ({e})") from None
+    except json.JSONDecodeError as e:
+        raise CalibrationError(f"{path}: not valid JSON ({e})") from None
+    a = validate_calibration(data, path)
+    return sensor_from_arrays(
+        a["K"], a["dist"], a["planes"], a["R_cr"], a["T_cr"], tuple(a["image_size"]), dtype
+    )
+
+
+def sensor_to_dict(
+    sensor: Sensor, rms_px: float = float("nan"), *, stamp: bool = False, **extra: Any
+) -> dict:
+    """The calibration JSON object of a sensor, plus any extra fields.
+
+    `stamp` adds the current UTC date (left out by default so that rendered data sets are
+    byte-for-byte reproducible).
+    """
+    cam = sensor.camera
+    out = {
+        "image_size": [int(cam.image_size[0]), int(cam.image_size[1])],
+        "K": np.asarray(cam.K, float).tolist(),
+        "dist": np.asarray(cam.dist, float).tolist(),
+        "rms_px": None if not math.isfinite(rms_px) else float(rms_px),
+        "planes": np.asarray(sensor.planes, float).tolist(),
+        "R_cr": np.asarray(sensor.R_cr, float).tolist(),
+        "T_cr": np.asarray(sensor.T_cr, float).tolist(),
+        "plane_angle_deg": plane_angle_deg(sensor.planes[0], sensor.planes[1]),
+    }
+    if stamp:
+        out["date"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
+    out.update(extra)
+    return out
+
+
+def save_sensor(
+    sensor: Sensor,
+    path: str | os.PathLike,
+    rms_px: float = float("nan"),
+    *,
+    stamp: bool = False,
+    **extra: Any,
+) -> None:
+    """Write a `Sensor` as the calibration JSON of DESIGN.md (extras are added verbatim)."""
+    data = sensor_to_dict(sensor, rms_px, stamp=stamp, **extra)
+    with open(path, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1)
+        f.write("\n")
