@@ -613,7 +613,10 @@ def _extract(image_rgb, stripe, mask, method):
         return np.asarray(pos, float), np.asarray(valid, bool)
     from .segment import extract
 
-    c = extract(image_rgb, method=method, space="r-g", stripe=stripe)
+    # Black outside the board: R − G is ≈ 0 on the grey board too, so the mask adds no edge,
+    # and a stripe on the background cannot outshine the one on the board.
+    masked = np.where(mask[..., None], np.asarray(image_rgb), 0).astype(np.uint8)
+    c = extract(masked, method=method, space="r-g", stripe=stripe)
     return np.asarray(c.pos, float), np.asarray(c.valid, bool)
 
 
