@@ -1,0 +1,359 @@
+"""Weld-bead features from one laser stripe's 3-D profile, and T-junctions from both stripes.
+
+Section 4.3 of the paper tracks the weld from the stripe profile but gives no algorithm; this
+module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
+
+1. **Base plate** — the profile's points (robot frame, mm) are written as (s, z) with s the
+   coordinate along the stripe (y_r for the horizontal stripe, x_r for the vertical one).
+   The plate is the line z = c0 + c1 s fitted by iteratively reweighted least squares: a
+   few Huber iterations from the least-squares start (convex, so they converge even when
+   the bead biases the start), then Tukey-biweight iterations that give the bead (a
+   one-sided outlier) zero weight. The scale is 1.4826·MAD of the residuals, floored.
+2. **Height** — every point in plate-aligned coordinates (t along the plate, h normal to
+   it, positive out of the wall).
+3. **Bead** — a run of points with h above `threshold_mm` (~0.3 mm), bounded on both sides
+   by plate points (a run that touches an end of the profile is only part of a bead, or a
+   stripe lying along a bead, and is not reported); invalid points inside a run (glints,
+   dropouts) do not break it. Of the runs, the one with the largest area Σh is the bead.
+4. **Cap** — a circle fitted to the run (algebraic Kåsa fit, then Gauss–Newton on the
+   geometric distance). Width = the chord where the circle meets the plate (h = 0), so the
+   toes below the threshold are extrapolated; height (reinforcement) = the circle's apex;
+   centre = the apex as a 3-D robot-frame point.
+
+Heading. One frame of the cross sensor does not observe the weld's heading robustly: the
+horizontal stripe crosses the followed weld at one point, and the vertical stripe runs along
+it (on the crown when the robot is centred, where the cross-section is flat and the lateral
+position is ambiguous). `weld_line_from_features` therefore fits the line through several
+bead centres — the tracker's recent horizontal-stripe centres carried into the current
+robot frame by odometry — and reports offset and heading; with one point it reports the
+offset and a NaN heading. A Kalman filter over (offset, heading) in the tracker is the
+intended consumer.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+__all__ = [
+    "WeldConfig",
+    "WeldFeature",
+    "WeldLine",
+    "plate_fit",
+    "stripe_feature",
+    "weld_features",
+    "weld_line_from_features",
+]
+
+HORIZONTAL_AXIS = 1  # the horizontal stripe runs along y_r
+VERTICAL_AXIS = 0  # the vertical stripe runs along x_r
+
+
+class WeldConfig(eqx.Module):
+    """Settings of the bead detector (mm unless stated).
+
+    threshold_mm: height above the plate that starts a bead run (~0.3 mm).
+    min_height_mm / min_width_mm / max_width_mm: a bead outside these is not found.
+    min_points: fewest points above the threshold in a bead run.
+    sigma_floor_mm: lowest plate-noise scale used by the robust fit.
+    fit_scale_mm: circle-fit RMS at which its confidence factor is 0.5.
+    junction_min_confidence: a vertical-stripe bead at least this confident is a junction.
+    n_huber / n_tukey: IRLS iterations (static: they shape the compiled loop).
+    """
+
+    threshold_mm: float = 0.3
+    min_height_mm: float = 0.5
+    min_width_mm: float = 4.0
+    max_width_mm: float = 40.0
+    min_points: int = 6
+    sigma_floor_mm: float = 0.02
+    fit_scale_mm: float = 0.15
+    junction_min_confidence: float = 0.3
+    n_huber: int = eqx.field(static=True, default=5)
+    n_tukey: int = eqx.field(static=True, default=8)
+    n_gauss_newton: int = eqx.field(static=True, default=4)
+
+
+class WeldFeature(NamedTuple):
+    """The bead seen on one stripe (robot frame, mm). Values are NaN where found is False.
+
+    found: a bead was detected. centre: (3,) apex of the bead cap. position: the apex's
+    coordinate along the stripe (y_r for the horizontal stripe, x_r for the vertical one).
+    width, height: chord at the plate and reinforcement. confidence: [0, 1].
+    noise_mm: robust scale of the plate residuals.
+    """
+
+    found: Bool[Array, ""]
+    centre: Float[Array, 3]
+    position: Float[Array, ""]
+    width: Float[Array, ""]
+    height: Float[Array, ""]
+    confidence: Float[Array, ""]
+    noise_mm: Float[Array, ""]
+
+
+class WeldLine(NamedTuple):
+    """The followed weld line: y_r at x_ref (offset, mm), heading (deg, CCW + from x_r)."""
+
+    offset_mm: Float[Array, ""]
+    heading_deg: Float[Array, ""]
+    heading_valid: Bool[Array, ""]
+
+
+def _check_profile(points, valid, name):
+    points = jnp.asarray(points)
+    valid = jnp.asarray(valid)
+    if points.ndim != 2 or points.shape[-1] != 3:
+        raise ValueError(f"{name}: points must have shape (N, 3), got {points.shape}")
+    if valid.shape != points.shape[:1]:
+        raise ValueError(f"{name}: valid must have shape ({points.shape[0]},), got {valid.shape}")
+    if not jnp.issubdtype(points.dtype, jnp.floating):
+        raise ValueError(f"{name}: points must be floating point, got {points.dtype}")
+    return points, valid.astype(bool) & jnp.all(jnp.isfinite(points), axis=-1)
+
+
+def _wls(A, b, w, eps):
+    """(AᵀWA + eps I)⁻¹ AᵀW b for tiny systems; no sqrt(w), so zero weights keep finite
+    gradients."""
+    n = A.shape[-1]
+    Aw = A * w[:, None]
+    return jnp.linalg.solve(Aw.T @ A + eps * jnp.eye(n, dtype=A.dtype), Aw.T @ b)
+
+
+def _wls_line(s, z, w):
+    """Weighted least-squares line z = c0 + c1 s (s pre-centred)."""
+    return _wls(jnp.stack([jnp.ones_like(s), s], -1), z, w, 1e-9)
+
+
+def _masked_median(x, mask):
+    # The robust scale is a weighting constant of IRLS: no gradient through the sort.
+    return jnp.nanmedian(jnp.where(mask, jax.lax.stop_gradient(x), jnp.nan))
+
+
+def plate_fit(
+    s: Float[Array, " n"], z: Float[Array, " n"], valid: Bool[Array, " n"], config: WeldConfig
+) -> tuple[Float[Array, 2], Float[Array, ""]]:
+    """Robust line z = c0 + c1 s through the plate points (Huber, then Tukey IRLS).
+
+    Args:
+        s: (N,) coordinate along the stripe, mm (centred by the caller for conditioning).
+        z: (N,) height z_r, mm.
+        valid: (N,) which points exist.
+    Returns:
+        (c0, c1) and the robust residual scale σ (mm, ≥ sigma_floor_mm).
+    """
+    w0 = valid.astype(s.dtype)
+    floor = jnp.asarray(config.sigma_floor_mm, s.dtype)
+
+    def scale(c):
+        r = z - c[0] - c[1] * s
+        return r, jnp.maximum(1.4826 * _masked_median(jnp.abs(r), valid), floor)
+
+    def body(i, c):
+        r, sigma = scale(c)
+        u = r / sigma
+        huber = jnp.minimum(1.0, 1.345 / jnp.maximum(jnp.abs(u), 1e-12))
+        tukey = jnp.square(jnp.clip(1.0 - jnp.square(u / 4.685), 0.0, 1.0))
+        w = jnp.where(i < config.n_huber, huber, tukey) * w0
+        # A degenerate weight set (all rejected) keeps the previous estimate.
+        ok = jnp.sum(w) > 2.0
+        return jnp.where(ok, _wls_line(s, z, jnp.where(ok, w, w0)), c)
+
+    c = _wls_line(s, z, w0)
+    c = jax.lax.fori_loop(0, config.n_huber + config.n_tukey, body, c)
+    return c, scale(c)[1]
+
+
+def _circle_fit(t, h, w, n_iter):
+    """Circle through weighted points: Kåsa algebraic fit, then Gauss–Newton (geometric).
+
+    Returns centre (a, b), radius R and the weighted RMS geometric residual.
+    """
+    W = jnp.sum(w)
+    tm = jnp.sum(w * t) / jnp.maximum(W, 1e-12)
+    x = t - tm
+    # x² + h² + D x + E h + F = 0 → linear in (D, E, F)
+    A = jnp.stack([x, h, jnp.ones_like(x)], -1)
+    D, E, F = _wls(A, -(x * x + h * h), w, 1e-9)
+    a, b = -D / 2, -E / 2
+    R = jnp.sqrt(jnp.maximum(a * a + b * b - F, 1e-12))
+
+    def gn(_, p):
+        a, b, R = p
+        dx, dh = x - a, h - b
+        d = jnp.sqrt(jnp.maximum(dx * dx + dh * dh, 1e-12))
+        r = d - R
+        J = jnp.stack([-dx / d, -dh / d, -jnp.ones_like(d)], -1)
+        step = _wls(J, -r, w, 1e-9)
+        new = p + step
+        good = jnp.all(jnp.isfinite(new)) & (new[2] > 0)
+        return jnp.where(good, new, p)
+
+    a, b, R = jax.lax.fori_loop(0, n_iter, gn, jnp.stack([a, b, R]))
+    d = jnp.sqrt(jnp.maximum(jnp.square(x - a) + jnp.square(h - b), 1e-12))
+    rms = jnp.sqrt(jnp.sum(w * jnp.square(d - R)) / jnp.maximum(W, 1e-12))
+    return a + tm, b, R, rms
+
+
+def stripe_feature(
+    points: Float[Array, "n 3"],
+    valid: Bool[Array, " n"],
+    axis: int,
+    config: WeldConfig = WeldConfig(),
+) -> WeldFeature:
+    """The weld bead crossed by one stripe (module docstring: plate, height, run, cap).
+
+    Args:
+        points: (N, 3) triangulated stripe points in the robot frame, mm, in stripe order
+            (image column order for the horizontal stripe, row order for the vertical).
+        valid: (N,) which points were detected (invalid rows may hold anything, even NaN).
+        axis: 1 for the horizontal stripe (position = y_r), 0 for the vertical (x_r).
+        config: WeldConfig.
+    Returns:
+        WeldFeature; jit/vmap-able, differentiable in `points` for a fixed bead run.
+    """
+    if axis not in (0, 1):
+        raise ValueError(
+            f"axis must be 0 (x_r, vertical stripe) or 1 (y_r, horizontal), got {axis}"
+        )
+    points, valid = _check_profile(points, valid, "stripe_feature")
+    dtype = points.dtype
+    n = points.shape[0]
+    P = jnp.where(valid[:, None], points, 0.0)
+    w0 = valid.astype(dtype)
+    n_valid = jnp.sum(w0)
+    s_raw, z = P[:, axis], P[:, 2]
+    s_mean = jnp.sum(w0 * s_raw) / jnp.maximum(n_valid, 1.0)
+    s = jnp.where(valid, s_raw - s_mean, 0.0)
+
+    # 1. plate, 2. plate-aligned coordinates (t along, h normal)
+    (c0, c1), sigma = plate_fit(s, z, valid, config)
+    norm = jnp.sqrt(1.0 + c1 * c1)
+    t = (s + c1 * (z - c0)) / norm
+    h = (z - c0 - c1 * s) / norm
+
+    # 3. runs above the threshold, delimited by valid plate points
+    above = valid & (h > config.threshold_mm)
+    below = valid & ~above
+    seg = jnp.cumsum(below.astype(jnp.int32))
+    n_below = seg[-1]
+    bounded = (seg >= 1) & (seg < n_below)
+    area = jax.ops.segment_sum(jnp.where(above & bounded, h, 0.0), seg, num_segments=n + 1)
+    best = jnp.argmax(area)
+    run = above & (seg == best)
+    n_run = jnp.sum(run.astype(dtype))
+
+    # 4. circular cap
+    w_run = run.astype(dtype)
+    a, b, R, rms = _circle_fit(
+        jnp.where(run, t, 0.0), jnp.where(run, h, 0.0), w_run, config.n_gauss_newton
+    )
+    half2 = R * R - b * b
+    height = b + R
+    convex = b < jnp.sum(w_run * h) / jnp.maximum(n_run, 1.0)
+    idx = jnp.arange(n)
+    extent = jnp.max(jnp.where(run, t, -1e9)) - jnp.min(jnp.where(run, t, 1e9))
+    width = jnp.where(half2 > 0, 2.0 * jnp.sqrt(jnp.maximum(half2, 1e-12)), extent)
+
+    # Apex back to (s, z) and to 3-D: the third coordinate from a linear fit q(s, z) over
+    # all valid points (exact for points on one laser plane).
+    s_c = (a - c1 * height) / norm
+    z_c = c0 + (c1 * a + height) / norm
+    other = 1 - axis
+    q = _wls(jnp.stack([jnp.ones_like(s), s, z], -1), P[:, other], w0, 1e-6)
+    q_c = q[0] + q[1] * s_c + q[2] * z_c
+    pos = s_c + s_mean
+    centre = jnp.zeros(3, dtype).at[axis].set(pos).at[other].set(q_c).at[2].set(z_c)
+
+    found = (
+        (area[best] > 0)
+        & (n_run >= config.min_points)
+        & convex
+        & (height >= config.min_height_mm)
+        & (width >= config.min_width_mm)
+        & (width <= config.max_width_mm)
+        & jnp.isfinite(height)
+        & jnp.isfinite(width)
+    )
+    # Confidence: circle-fit quality × bead contrast over the plate noise × coverage of the
+    # run by detected points × share of the stripe that was detected at all.
+    span = jnp.sum(
+        ((idx >= jnp.argmax(run)) & (idx <= n - 1 - jnp.argmax(run[::-1]))).astype(dtype)
+    )
+    f_fit = 1.0 / (1.0 + jnp.square(rms / config.fit_scale_mm))
+    f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
+    f_cover = jnp.clip(n_run / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_run / 15.0, 0, 1)
+    f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
+    confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid, 0.0)
+    nan = jnp.asarray(jnp.nan, dtype)
+    return WeldFeature(
+        found=found,
+        centre=jnp.where(found, centre, nan),
+        position=jnp.where(found, pos, nan),
+        width=jnp.where(found, width, nan),
+        height=jnp.where(found, height, nan),
+        confidence=confidence.astype(dtype),
+        noise_mm=sigma,
+    )
+
+
+@jax.jit
+def weld_features(
+    profile_h: Float[Array, "w 3"],
+    valid_h: Bool[Array, " w"],
+    profile_v: Float[Array, "h 3"],
+    valid_v: Bool[Array, " h"],
+    config: WeldConfig = WeldConfig(),
+) -> tuple[WeldFeature, WeldFeature, Bool[Array, ""]]:
+    """Beads on both stripes and the T-junction flag.
+
+    Args:
+        profile_h, valid_h: the horizontal stripe's points (W, 3) (robot frame, mm, column
+            order) and mask; its bead is the followed weld, position = its y_r (the offset).
+        profile_v, valid_v: the vertical stripe's (H, 3) points and mask; a bead here is a
+            crossing weld, position = its x_r (the junction distance).
+        config: WeldConfig.
+    Returns:
+        (feature_h, feature_v, junction) with junction true when the vertical stripe crosses
+        a bead with confidence ≥ config.junction_min_confidence.
+    """
+    fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
+    fv = stripe_feature(profile_v, valid_v, VERTICAL_AXIS, config)
+    junction = fv.found & (fv.confidence >= config.junction_min_confidence)
+    return fh, fv, junction
+
+
+@jax.jit
+def weld_line_from_features(
+    centres: Float[ArrayLike, "k 3"],
+    weights: Float[ArrayLike, " k"],
+    x_ref: Float[ArrayLike, ""] = 150.0,
+    min_spread_mm: float = 5.0,
+) -> WeldLine:
+    """Offset and heading of the weld line through bead centres (weighted least squares).
+
+    Fits y_r = y0 + m (x_r − x_ref) to the centres (robot frame, mm) — typically the
+    horizontal stripe's bead centres of recent frames moved into the current robot frame by
+    odometry, weighted by confidence (0 for frames without a bead). offset = y0, heading =
+    atan(m) in degrees, CCW positive (DESIGN.md tracking-log convention). When the weighted
+    spread of x_r is below `min_spread_mm` (e.g. a single frame) the heading is not
+    observable: offset is the weighted mean y_r, heading NaN, heading_valid False.
+    """
+    c = jnp.asarray(centres)
+    w = jnp.where(jnp.all(jnp.isfinite(c), -1), jnp.asarray(weights, c.dtype), 0.0)
+    c = jnp.where(w[:, None] > 0, c, 0.0)
+    W = jnp.maximum(jnp.sum(w), 1e-12)
+    x = c[:, 0] - x_ref
+    y = c[:, 1]
+    xm, ym = jnp.sum(w * x) / W, jnp.sum(w * y) / W
+    sxx = jnp.sum(w * jnp.square(x - xm)) / W
+    sxy = jnp.sum(w * (x - xm) * (y - ym)) / W
+    valid = sxx > jnp.square(min_spread_mm)
+    m = jnp.where(valid, sxy / jnp.where(valid, sxx, 1.0), 0.0)
+    offset = jnp.where(jnp.sum(w) > 0, ym - m * xm, jnp.nan)
+    heading = jnp.where(valid, jnp.degrees(jnp.arctan(m)), jnp.nan)
+    return WeldLine(offset, heading, valid)
