@@ -28,9 +28,10 @@ shifted slices with folded symmetric/antisymmetric taps, reflect boundary, ident
 `scipy.ndimage.gaussian_filter(..., order=..., mode="reflect", truncate=4.0)`.
 
 Strength threshold: a point is kept when −λ ≥ `threshold` × (the frame's largest −λ among
-geometrically valid ridge points) and −λ ≥ `min_strength` (absolute, in intensity/px²).
-The relative part makes the detector independent of the image's scale (MED output has an
-arbitrary scale); the absolute part lets a caller reject frames without a stripe.
+geometrically valid ridge points), −λ ≥ `snr` × (mean |λ| over the frame, the noise level of
+the strength map) and −λ ≥ `min_strength` (absolute, in intensity/px²). The first two are
+independent of the image's scale (MED output has an arbitrary scale); `snr` also rejects
+frames without a stripe.
 
 Everything is pure JAX on one frame, jit-compiled at the public entry points, vmap-able
 over frames and differentiable with respect to the image (`pos` is NaN where `valid` is
@@ -154,6 +155,7 @@ def gaussian_derivative(
 
 class _Ridge(NamedTuple):
     strength: Array  # −λ, positive on bright ridges
+    scale: Array  # mean |λ| over the frame: the noise level of the strength map
     nv: Array
     nu: Array
     t: Array
@@ -184,11 +186,12 @@ def _ridge(image: Array, sigma: float, max_offset) -> _Ridge:
     neg = lam < 0
     t = jnp.where(neg, -(nv * rv + nu * ru) / jnp.where(neg, lam, -1.0), 0.0)
     geometric = neg & (jnp.abs(t * nv) <= max_offset) & (jnp.abs(t * nu) <= max_offset)
-    return _Ridge(-lam, nv, nu, t, geometric)
+    scale = lax.stop_gradient(jnp.mean(jnp.abs(lam)))
+    return _Ridge(-lam, scale, nv, nu, t, geometric)
 
 
 def _select(
-    ridge: _Ridge, axis: int, threshold, min_strength, min_cos: float, strongest
+    ridge: _Ridge, axis: int, threshold, min_strength, snr, min_cos: float, strongest
 ) -> Centres:
     """Strongest accepted ridge point per column (axis 0) or row (axis 1), at the crossing."""
     n_along = ridge.nv if axis == 0 else ridge.nu
@@ -198,6 +201,7 @@ def _select(
         & steep_ok
         & (ridge.strength >= threshold * strongest)
         & (ridge.strength >= min_strength)
+        & (ridge.strength >= snr * ridge.scale)
         & (ridge.strength > 0)
     )
     safe_n = jnp.where(steep_ok, n_along, 1.0)
@@ -232,11 +236,11 @@ def _check_image(image) -> Array:
 
 
 @functools.partial(jax.jit, static_argnames=("sigma", "axis", "max_angle_deg"))
-def _steger_centres(image, threshold, min_strength, max_offset, *, sigma, axis, max_angle_deg):
+def _steger_centres(image, threshold, min_strength, snr, max_offset, *, sigma, axis, max_angle_deg):
     ridge = _ridge(image, sigma, max_offset)
     min_cos = math.cos(math.radians(max_angle_deg))
     strongest = _strongest(ridge, min_cos, (axis,))
-    return _select(ridge, axis, threshold, min_strength, min_cos, strongest)
+    return _select(ridge, axis, threshold, min_strength, snr, min_cos, strongest)
 
 
 def steger_centres(
@@ -246,6 +250,7 @@ def steger_centres(
     axis: int = 0,
     threshold: float = 0.1,
     min_strength: float = 0.0,
+    snr: float = 5.0,
     max_offset: float = 0.6,
     max_angle_deg: float = 60.0,
 ) -> Centres:
@@ -260,6 +265,9 @@ def steger_centres(
         threshold: relative strength threshold in [0, 1]: keep points with −λ at least this
             fraction of the frame's strongest ridge point.
         min_strength: absolute floor on −λ (intensity units / px²).
+        snr: scale-free noise floor: keep points with −λ ≥ snr × mean |λ| over the frame.
+            On pure white noise the strongest ridge point of a column is ≈ 3.5 (≤ 5.6) times
+            that mean, so the default 5 rejects nearly all noise-only columns and frames.
         max_offset: acceptance |t n_v|, |t n_u| ≤ max_offset. Steger's value is 0.5; the
             default 0.6 covers the Taylor overshoot (≈ d³/σ_tot²) of a centre on a pixel
             border, which would otherwise be rejected by both neighbours and lose the column.
@@ -276,6 +284,7 @@ def steger_centres(
         image,
         jnp.asarray(threshold, image.dtype),
         jnp.asarray(min_strength, image.dtype),
+        jnp.asarray(snr, image.dtype),
         jnp.asarray(max_offset, image.dtype),
         sigma=float(sigma),
         axis=axis,
@@ -284,13 +293,13 @@ def steger_centres(
 
 
 @functools.partial(jax.jit, static_argnames=("sigma", "max_angle_deg"))
-def _steger_cross(image, threshold, min_strength, max_offset, *, sigma, max_angle_deg):
+def _steger_cross(image, threshold, min_strength, snr, max_offset, *, sigma, max_angle_deg):
     ridge = _ridge(image, sigma, max_offset)
     min_cos = math.cos(math.radians(max_angle_deg))
     strongest = _strongest(ridge, min_cos, (0, 1))
     return (
-        _select(ridge, 0, threshold, min_strength, min_cos, strongest),
-        _select(ridge, 1, threshold, min_strength, min_cos, strongest),
+        _select(ridge, 0, threshold, min_strength, snr, min_cos, strongest),
+        _select(ridge, 1, threshold, min_strength, snr, min_cos, strongest),
     )
 
 
@@ -300,6 +309,7 @@ def steger_cross(
     sigma: float,
     threshold: float = 0.1,
     min_strength: float = 0.0,
+    snr: float = 5.0,
     max_offset: float = 0.6,
     max_angle_deg: float = 45.0,
 ) -> tuple[Centres, Centres]:
@@ -314,6 +324,7 @@ def steger_cross(
         image,
         jnp.asarray(threshold, image.dtype),
         jnp.asarray(min_strength, image.dtype),
+        jnp.asarray(snr, image.dtype),
         jnp.asarray(max_offset, image.dtype),
         sigma=float(sigma),
         max_angle_deg=float(max_angle_deg),

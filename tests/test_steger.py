@@ -160,3 +160,12 @@ def test_bad_input():
     with pytest.raises(ValueError, match="width"):
         sigma_for_width(0.0)
     assert isinstance(steger_centres(np.zeros((8, 8), np.uint8), sigma=1.0), Centres)
+
+
+def test_snr_floor_rejects_noise_only_frames():
+    rng = np.random.default_rng(7)
+    noise = rng.normal(0.0, 5.0, size=(H, W))
+    empty = steger_centres(jnp.asarray(noise), sigma=2.0)
+    assert np.asarray(empty.valid).mean() < 0.03
+    stripe = steger_centres(jnp.asarray(noise + 60.0 * gaussian(ROWS, 44.2, 2.0)), sigma=2.0)
+    assert np.asarray(stripe.valid).mean() > 0.95
