@@ -1,0 +1,257 @@
+"""Path-following controller for the differential-drive wall-climbing robot.
+
+Law (FOLLOW). With the weld's lateral offset e (mm, y_r of the weld at the horizontal
+stripe, + = weld to the left) and heading θ (rad, weld direction relative to x_r, CCW +):
+
+    ω = k_heading · θ + k_offset · v · e
+
+Linearised about the line (robot lateral error d = −e at the stripe, heading error ψ = −θ,
+ḋ = v ψ, ψ̇ = ω) this is d̈ + k_heading ḋ + k_offset v² d = 0 plus extra damping from the
+stripe being a look-ahead point L ahead of the wheels (L = 150 mm in the default rig): the
+offset there is e = −(d + L ψ), so the closed loop is
+
+    s² + (k_heading + k_offset v L) s + k_offset v² = 0,
+
+damping ratio ζ = k_heading / (2 v √k_offset) + L √k_offset / 2, independent of v for the
+look-ahead part. The defaults (k_offset = 1/80² mm⁻², k_heading = 0.05 s⁻¹) give ζ ≈ 1 and a
+time constant ≈ 80 mm / v (≈ 2.7 s at 30 mm/s). An unknown heading (NaN) drops the heading
+term: the look-ahead alone still converges (ζ ≈ 0.94).
+
+Speed: v = v_nominal scaled by confidence between `min_confidence` (stop) and
+`full_confidence`; then limits on v, ω, their accelerations and each wheel's speed (the
+curvature is kept when a wheel saturates).
+
+T-junction state machine:
+FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed`, the
+junction distance x_j is dead-reckoned (x_j −= v dt) between sightings and reset by each
+sighting; when x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
+(`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
+turned angle is integrated from the commanded ω, or from the measured heading when the
+caller passes it → FOLLOW, ignoring junction sightings for `junction_ignore_mm` of travel.
+
+Pure Python; no I/O.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+
+__all__ = ["ControllerConfig", "Command", "PathController", "State", "wheel_speeds"]
+
+
+class State(enum.Enum):
+    FOLLOW = "follow"
+    APPROACH_JUNCTION = "approach_junction"
+    TURN = "turn"
+
+
+@dataclasses.dataclass(frozen=True)
+class ControllerConfig:
+    """Gains and limits (mm, s, rad)."""
+
+    v_nominal: float = 30.0
+    v_max: float = 60.0
+    omega_max: float = 0.5
+    accel_max: float = 60.0  # mm/s²
+    alpha_max: float = 1.5  # rad/s²
+    wheel_max: float = 80.0  # mm/s, each wheel
+    track_mm: float = 200.0  # wheel separation
+    k_offset: float = 1.0 / 80.0**2  # rad/mm² (ω per v per mm offset)
+    k_heading: float = 0.05  # 1/s
+    min_confidence: float = 0.2
+    full_confidence: float = 0.6
+    approach_speed: float = 20.0
+    turn_direction: int = +1  # +1 left (CCW), −1 right
+    turn_rate: float = 0.3  # rad/s during TURN
+    turn_radius_mm: float = 0.0  # 0 = in place
+    junction_tolerance_mm: float = 2.0
+    junction_ignore_mm: float = 150.0
+    junction_min_confidence: float = 0.3
+
+    def __post_init__(self):
+        if self.turn_direction not in (-1, 1):
+            raise ValueError(
+                f"turn_direction must be +1 (left) or -1 (right), got {self.turn_direction}"
+            )
+        for name in ("v_max", "omega_max", "accel_max", "alpha_max", "wheel_max", "track_mm"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if not self.full_confidence > self.min_confidence:
+            raise ValueError("full_confidence must exceed min_confidence")
+
+
+@dataclasses.dataclass(frozen=True)
+class Command:
+    """One control output: body velocities and the equivalent wheel speeds."""
+
+    v_mm_s: float
+    omega_rad_s: float
+    left_mm_s: float
+    right_mm_s: float
+    state: State
+
+
+def wheel_speeds(v: float, omega: float, track_mm: float) -> tuple[float, float]:
+    """(left, right) wheel speeds, mm/s, of body velocity v (mm/s), ω (rad/s, CCW +)."""
+    return v - omega * track_mm / 2.0, v + omega * track_mm / 2.0
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return min(max(x, lo), hi)
+
+
+def _finite(x, default: float = 0.0) -> float:
+    return float(x) if x is not None and math.isfinite(x) else default
+
+
+class PathController:
+    """Offset + heading → (v, ω) with limits, confidence slowdown and the T-junction turn."""
+
+    def __init__(self, config: ControllerConfig | None = None):
+        self.config = config or ControllerConfig()
+        self.reset()
+
+    def reset(self) -> None:
+        self.state = State.FOLLOW
+        self.v = 0.0
+        self.omega = 0.0
+        self.junction_x: float | None = None
+        self.turned = 0.0
+        self._turn_start_heading: float | None = None
+        self._ignore_left = 0.0
+        self.turns_completed = 0
+
+    def _limit(self, v_target: float, omega_target: float, dt: float) -> tuple[float, float]:
+        c = self.config
+        v_target = _clip(v_target, -c.v_max, c.v_max)
+        omega_target = _clip(omega_target, -c.omega_max, c.omega_max)
+        # wheel saturation: scale both to keep the curvature
+        left, right = wheel_speeds(v_target, omega_target, c.track_mm)
+        peak = max(abs(left), abs(right))
+        if peak > c.wheel_max:
+            v_target *= c.wheel_max / peak
+            omega_target *= c.wheel_max / peak
+        v = self.v + _clip(v_target - self.v, -c.accel_max * dt, c.accel_max * dt)
+        omega = self.omega + _clip(omega_target - self.omega, -c.alpha_max * dt, c.alpha_max * dt)
+        # the acceleration step from a saturated previous command may not exceed the wheels
+        left, right = wheel_speeds(v, omega, c.track_mm)
+        peak = max(abs(left), abs(right))
+        if peak > c.wheel_max:
+            v *= c.wheel_max / peak
+            omega *= c.wheel_max / peak
+        return v, omega
+
+    def _follow(self, offset: float, heading_deg: float, speed: float) -> tuple[float, float]:
+        c = self.config
+        theta = math.radians(_finite(heading_deg))
+        return speed, c.k_heading * theta + c.k_offset * speed * offset
+
+    def update(
+        self,
+        dt: float,
+        offset_mm: float,
+        heading_deg: float = math.nan,
+        confidence: float = 1.0,
+        junction: bool = False,
+        junction_x_mm: float = math.nan,
+        robot_heading_rad: float | None = None,
+    ) -> Command:
+        """One control step of `dt` seconds from the latest observation.
+
+        Args:
+            dt: time since the previous update, s (> 0).
+            offset_mm, heading_deg, confidence, junction, junction_x_mm: the observation
+                (DESIGN.md tracking-log meanings; NaN = unknown).
+            robot_heading_rad: measured robot heading (odometry), used to end the TURN;
+                without it the commanded ω is integrated.
+        """
+        if not dt > 0:
+            raise ValueError(f"dt must be positive, got {dt}")
+        c = self.config
+        confidence = _finite(confidence)
+        seen_offset = math.isfinite(offset_mm) if offset_mm is not None else False
+        scale = _clip(
+            (confidence - c.min_confidence) / (c.full_confidence - c.min_confidence), 0, 1
+        )
+
+        if self.state is State.TURN:
+            if robot_heading_rad is not None:
+                if self._turn_start_heading is None:
+                    self._turn_start_heading = robot_heading_rad
+                d = robot_heading_rad - self._turn_start_heading
+                self.turned = abs(math.atan2(math.sin(d), math.cos(d)))
+            else:
+                self.turned += abs(self.omega) * dt
+            remaining = math.pi / 2 - self.turned
+            if remaining <= 1e-3:
+                self.state = State.FOLLOW
+                self._ignore_left = c.junction_ignore_mm
+                self.turns_completed += 1
+                self.junction_x = None
+                v_t, w_t = 0.0, 0.0
+            else:
+                # slow down near the end so the angle does not overshoot (|ω| ≤ √(2 α θ))
+                rate = min(c.turn_rate, math.sqrt(2 * c.alpha_max * remaining), remaining / dt)
+                w_t = c.turn_direction * rate
+                v_t = rate * c.turn_radius_mm
+            v, w = self._limit(v_t, w_t, dt)
+            return self._emit(v, w)
+
+        if self.state is State.APPROACH_JUNCTION and (not seen_offset or scale <= 0.0):
+            # The horizontal stripe runs 150 mm ahead: near the T it has passed the end of
+            # the followed weld and sees no bead. Expected: go straight, dead-reckoning.
+            v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
+            self._advance_junction(v, dt)
+            if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:
+                self._start_turn()
+            return self._emit(v, w)
+        if not seen_offset or scale <= 0.0:
+            v, w = self._limit(0.0, 0.0, dt)  # lost the weld: brake, hold still
+            self._advance_junction(v, dt)
+            return self._emit(v, w)
+
+        if self._ignore_left > 0:
+            junction = False
+        if junction and confidence >= c.junction_min_confidence and math.isfinite(junction_x_mm):
+            self.junction_x = float(junction_x_mm)
+            if self.state is State.FOLLOW:
+                self.state = State.APPROACH_JUNCTION
+
+        speed = c.v_nominal * scale
+        if self.state is State.APPROACH_JUNCTION:
+            if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:
+                self._start_turn()
+                v, w = self._limit(0.0, 0.0, dt)
+                return self._emit(v, w)
+            speed = self._approach_speed(min(speed, c.approach_speed))
+        v_t, w_t = self._follow(float(offset_mm), heading_deg, speed)
+        v, w = self._limit(v_t, w_t, dt)
+        self._advance_junction(v, dt)
+        return self._emit(v, w)
+
+    def _approach_speed(self, speed: float) -> float:
+        """Speed that can still brake (accel_max) to rest at the turning point."""
+        c = self.config
+        room = max(self.junction_x - c.turn_radius_mm, 0.0)
+        return min(speed, math.sqrt(2.0 * c.accel_max * room))
+
+    def _start_turn(self) -> None:
+        self.state = State.TURN
+        self.turned = 0.0
+        self._turn_start_heading = None
+
+    def _advance_junction(self, v: float, dt: float) -> None:
+        if self.junction_x is not None:
+            self.junction_x -= v * dt
+        self._ignore_left = max(0.0, self._ignore_left - abs(v) * dt)
+
+    def stop(self) -> Command:
+        """Immediate stop (no ramp), e.g. after the link sent STOP; the state is kept."""
+        return self._emit(0.0, 0.0)
+
+    def _emit(self, v: float, w: float) -> Command:
+        self.v, self.omega = v, w
+        left, right = wheel_speeds(v, w, self.config.track_mm)
+        return Command(v, w, left, right, self.state)
