@@ -125,6 +125,8 @@ def _segments(I: Array, axis: int) -> Array:
 
 
 def _length(I: Array, axis: int, L: int | None) -> int:
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (filter down columns) or 1 (along rows), got {axis}")
     m = I.shape[axis]
     L = default_filter_length(m) if L is None else int(L)
     if not 2 <= L <= m:
@@ -168,7 +170,8 @@ def _default_loading(dtype) -> float:
 
 
 def _kurtosis_change(scaled_error):
-    return jnp.abs(scaled_error[1])
+    # optimistix keeps its error in the default float dtype; match it for float32 under x64.
+    return jnp.abs(scaled_error[1]).astype(jnp.result_type(float))
 
 
 @functools.partial(eqx.filter_jit)
