@@ -37,7 +37,11 @@ Choices where the paper is vague:
   (default 8) at both ends, so it starts and ends at zero with no step; the full
   convolution (all M + L − 1 outputs) is then used, which keeps every stripe row, unlike the
   valid part (only M − L + 1 = 241 rows for L = M/2). Stripes inside the ramps are
-  attenuated, not moved much.
+  attenuated, not moved much. Measured limit (tests/test_med.py): a background gradient
+  that leaves a segment end ~1.7× the stripe amplitude away from the segment mean is
+  handled (without the taper MED locks onto the border in every column); at ~4.4× the
+  tapered ends can still win. Longer ``taper`` values trade border
+  coverage for robustness.
 - Delay (eqs. (25)–(26), correction 6). The filter moves the stripe by its delay d, which
   MED chooses freely. d is the peak of the cross-correlation of B with X summed over
   segments (weighted like R), refined on its band-limited interpolant (Newton on
