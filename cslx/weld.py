@@ -20,6 +20,14 @@ module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
    toes below the threshold are extrapolated; height (reinforcement) = the circle's apex;
    centre = the apex as a 3-D robot-frame point.
 
+Junctions (limitation). `weld_features` reports a junction when the vertical stripe crosses
+a bead bounded by plate on both sides, i.e. a crossing weld on bare plate. With the default
+rig the vertical stripe lies along the followed weld's crown when the robot is on track, so
+at a real T the vertical profile is a step (crown level behind the crossing weld, plate
+beyond it) with the crossing bead at the step: that run touches the profile's end and is NOT
+reported by this rule. Detecting the end of the followed bead along the vertical stripe
+(anchoring its plate to the horizontal stripe's plate) is the missing piece.
+
 Heading. One frame of the cross sensor does not observe the weld's heading robustly: the
 horizontal stripe crosses the followed weld at one point, and the vertical stripe runs along
 it (on the crown when the robot is centred, where the cross-section is flat and the lateral

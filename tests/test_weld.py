@@ -153,6 +153,8 @@ def test_plate_fit_matches_least_squares_on_plate_points():
 
 
 def test_junction_from_vertical_stripe():
+    """A crossing bead on bare plate under the vertical stripe (not yet the T seen from a
+    robot on the stem's crown: see the cslx.weld docstring)."""
     rng = np.random.default_rng(7)
     ph, vh, _ = horizontal_profile(rng, 3.0, 14.0, 2.0)
     pv, vv = vertical_profile(rng, cross_x=170.0, width=16.0, height=2.2)
