@@ -152,12 +152,18 @@ def default_sensor(dtype=None) -> Sensor:
     """The rendered rig: Table 4's intrinsics (correction 2) and an orthogonal cross projector.
 
     Table 4's printed planes are 81° apart, not 89.998° (correction 2), so the renderer gets
-    its own projector: 90 mm off the optical axis along −x and −y of the camera and aimed at
-    the point of the optical axis 230 mm away (the stand-off of the paper's Table 5), which
-    gives a ≈ 21° triangulation angle for each sheet.
+    its own projector: 60 mm off the optical axis along −x and −y of the camera (a baseline
+    of 85 mm) and aimed at the wall 230 mm away (the stand-off of the paper's Table 5), which
+    gives a ≈ 15–25° triangulation angle for each sheet.
+
+    The projector aims 40 mm to the side of the optical axis (x_c = +40 mm, the robot's
+    right): the horizontal stripe still crosses the followed weld in the middle of the image,
+    while the vertical stripe runs beside that weld on bare plate, so a crossing weld ahead
+    shows on it as a bead with plate on both sides (a T-junction is then unambiguous; with
+    the cross centred on the weld the vertical stripe would lie along the bead's crown).
     """
     R_cr, T_cr = default_mount()
-    planes = cross_projector_planes(origin=(-60.0, -60.0, 0.0), target=(0.0, 0.0, 230.0))
+    planes = cross_projector_planes(origin=(-60.0, -60.0, 0.0), target=(40.0, 0.0, 230.0))
     return sensor_from_arrays(TABLE4_K, TABLE4_DIST, planes, R_cr, T_cr, (640, 480), dtype=dtype)
 
 
