@@ -155,3 +155,19 @@ def test_cli_extract_with_calibration(tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"K": 1}))
     assert main(["extract", str(img), "--calib", str(bad), "--out", str(out)]) == 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["steger", "med", "cm"])
+def test_rendered_cross_frames(method):
+    # Rendered ground truth (cslx.synth): both stripes found on most columns/rows, with a
+    # sub-millimetre median error. Slow: the renderer compiles for about a minute.
+    from cslx.synth import render_dataset
+
+    images, gt, sensor = render_dataset("cross", "clean", n_frames=2, seed=101)
+    for k in range(len(images)):
+        for stripe, key, plane in (("h", "h_xyz", 0), ("v", "v_xyz", 1)):
+            c = extract(images[k], method, space="r-g", stripe=stripe)
+            r = stripe_errors(centres_to_pixels(c, stripe), gt[key][k], sensor, plane)
+            assert r["detection_rate"] > 0.9, r
+            assert r["median_mm"] < 0.5, r
