@@ -20,27 +20,31 @@ Both forms are offered:
 - ``"normalized"``: the mean over columns of the sample excess kurtosis, M k_j − 3.
 
 Both are monotone in S = Σ_j k_j while S > 3, so they rank spaces identically on every
-frame with a stripe in it (S is ≈ 3N/M = 4 for pure Gaussian noise on a 640×480 frame and
-grows with the stripe). They part where S < 3: the square turns the literal form around, so
-a *flat*, low-kurtosis space (uniform background, no stripe, k_j → 1/M) scores
-(3 − N/M)² ≈ 2.8 and can beat a weak stripe with S = 4.5 (score 2.25). The normalized
-form has no such reversal, its value is comparable across frame sizes (it does not grow
-with N/M) and reads as a kurtosis (0 for Gaussian noise). It is the default;
-`experiments` record the choice next to the numbers (see tests/test_colour.py for the
-measured reversal).
+frame with a clear stripe in it (S ≈ 3N/M for Gaussian noise, 4 on a 640×480 frame scored
+by columns, and grows with the stripe). They part where S < 3: the square turns the
+literal form around, so a *flat*, low-kurtosis space (k_j → 1/M) can outscore a weak
+stripe. Scored by rows (the vertical stripe, N/M = 480/640) pure noise already has
+S ≈ 2.25 < 3. The normalized form has no reversal, reads as a kurtosis (0 for Gaussian
+noise) and does not grow with N/M: it is the default. Evidence (rendered cross scenes,
+`cslx.synth`, sunny/shadow/glare, laser power 260/60/25/12/6, 3 frames each, both stripe
+directions, 90 searches): the forms chose the same space 82 times; the 8 differences were
+all weak-stripe row-wise searches, and the normalized choice put the per-row maximum within
+2 px of the true stripe more often in 7 of the 8 (e.g. power 25: 46 % vs 39 % of rows;
+one paper-form pick, (−2, −1, 1), hid the stripe completely).
 
 Kurtosis is even in the weights and scale-invariant: w, 2w and −w score the same. The
 search therefore returns the sign that makes the stripe bright (positive skewness), so a
-green laser gives G − R rather than the grid's R − G with a dark stripe.
+green laser gives G − R or 2G − R − B rather than the grid's R − G with a dark stripe.
 
 Clipped cores. When the laser core saturates to white (R = G = B = 255), every zero-sum
-space (R − G, 2R − G − B, …) maps the core to 0: the stripe becomes two thin side lobes
-around a hole, which has lower kurtosis than an intact peak. The search then drifts
-towards spaces with a positive weight sum (R, 2R − G, …) that keep the core bright at the
-price of passing some grey sunlight; with little sunlight it picks R-like spaces, with
-strong grey sunlight the hole-y R − G may still win. Either way the chosen space is the
-one whose columns are most impulsive; the centre detector must cope with a split core
-(tests/test_colour.py measures both cases).
+space (R − G, 2R − G − B, …) maps the core to 0: the stripe becomes two thin lobes around
+a hole. The search does not notice: thin lobes are as impulsive as an intact peak, so on
+rendered frames with clipped cores (power 260–800) it still picks R − G / 2R − G − B (or
+2G − R − B for green), while the per-column maximum lands on a lobe, > 2 px from the
+true centre in 30–95 % of columns (gray keeps the core: 80–90 % within 2 px, but passes
+the sunlight). Filling white pixels with the space's maximum was tried and rejected: it
+also fills white glints (glare scenes: 90 % → 64 % within 2 px). The centre detector must
+therefore cope with a split core (smoothing wider than the hole merges the lobes).
 
 Everything is pure JAX, differentiable in the weights and the image, jit/vmap friendly;
 the dtype follows the inputs (uint8 frames become the default float dtype).
