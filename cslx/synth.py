@@ -1,0 +1,735 @@
+"""Rendered scenes with exact ground truth: the project's laboratory.
+
+A steel wall (locally the plane z_w = 0, optionally a tower's cylinder) carries weld beads
+with a circular-arc cap (10–25 mm wide, 1–3 mm high): straight welds and T-intersections.
+A wall-climbing robot carries the cross structured-light sensor (`cslx.sensor`); each pixel's
+ray (with the lens distortion) is cast onto the surface, which is lit by ambient light,
+near-grey sunlight (diffuse, a broad sheen and sharp glints on the rippled bead, hard
+shadows) and the two laser sheets, whose Gaussian thickness profile is evaluated at the
+surface point's distance to each plane. Speckle, lens blur, shot and read noise, clipping
+and 8-bit quantisation follow.
+
+Ground truth is exact, not "the brightest pixel": for the horizontal stripe, per image
+column, the sub-pixel row where the real surface meets plane 0 (a root-find along the
+column, each evaluation a root-found ray cast, float64), and its 3-D point; per row for the
+vertical stripe and plane 1; NaN where the stripe is absent (off the image, outside the
+fan, or in the laser's shadow behind a bead).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import zipfile
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._synth_scene import (
+    MAX_WELDS,
+    RobotPose,
+    World,
+    camera_to_world,
+    stripe_truth,
+)
+from ._synth_shade import (
+    Conditions,
+    Nuisance,
+    checkerboard_radiance,
+    draw_conditions,
+    expose,
+    quantise,
+    surface_radiance,
+)
+from .camera import project
+from .sensor import Sensor, default_sensor, load_sensor, save_sensor
+
+__all__ = [
+    "NUISANCES",
+    "Nuisance",
+    "RobotPose",
+    "World",
+    "camera_to_world",
+    "load_dataset",
+    "make_world",
+    "random_pose",
+    "random_world",
+    "render_calibration",
+    "render_dataset",
+    "render_frame",
+    "render_video",
+    "stripe_truth",
+    "true_weld_line",
+    "write_dataset",
+]
+
+#: Red laser with small green/blue leakage (default) and a 520 nm green laser.
+LASER_RGB = {"red": (1.0, 0.07, 0.04), "green": (0.12, 1.0, 0.2)}
+
+NUISANCES: dict[str, Nuisance] = {
+    "clean": Nuisance(),
+    "sunny": Nuisance(
+        ambient=150.0, sun=300.0, sun_tilt_deg=35.0, sheen=130.0, glint=150.0, laser_power=260.0
+    ),
+    "glare": Nuisance(
+        ambient=120.0, sun=180.0, sun_tilt_deg=32.0, sheen=60.0, glint=3000.0, laser_power=250.0
+    ),
+    "shadow": Nuisance(
+        ambient=90.0, sun=350.0, sun_tilt_deg=40.0, sheen=120.0, glint=150.0, shadow=1.0
+    ),
+}
+#: "mixed" draws one of the presets above per frame.
+NUISANCE_NAMES = (*NUISANCES, "mixed")
+
+
+def _nuisance(nuisance: str | Nuisance, rng: np.random.Generator | None = None) -> Nuisance:
+    if isinstance(nuisance, Nuisance):
+        return nuisance
+    if nuisance == "mixed":
+        rng = rng or np.random.default_rng(0)
+        return NUISANCES[list(NUISANCES)[int(rng.integers(len(NUISANCES)))]]
+    if nuisance not in NUISANCES:
+        raise ValueError(f"unknown nuisance {nuisance!r}; choose one of {NUISANCE_NAMES}")
+    return NUISANCES[nuisance]
+
+
+def _rng(rng) -> np.random.Generator:
+    return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+
+
+# ----------------------------------------------------------------------------- worlds, poses
+
+
+def make_world(
+    welds: list[tuple[tuple[float, float], float, float, float, bool]],
+    *,
+    radius_mm: float = math.inf,
+    rng: np.random.Generator | int = 0,
+) -> World:
+    """Build a `World` from welds ((x, y) point, direction angle rad, width mm, height mm, half).
+
+    Args:
+        welds: at most `MAX_WELDS` entries; `half` makes a weld that starts at its point.
+        radius_mm: radius of a cylindrical wall (a tower, axis along y_w); inf for a plane.
+        rng: seeds the brushed-metal texture of the plate.
+    """
+    if not 1 <= len(welds) <= MAX_WELDS:
+        raise ValueError(f"a world holds 1 to {MAX_WELDS} welds, got {len(welds)}")
+    rng = _rng(rng)
+    pts = np.zeros((MAX_WELDS, 2))
+    dirs = np.tile([1.0, 0.0], (MAX_WELDS, 1))
+    widths = np.full(MAX_WELDS, 10.0)
+    heights = np.zeros(MAX_WELDS)
+    half = np.zeros(MAX_WELDS)
+    for k, (p, ang, w, h, hf) in enumerate(welds):
+        if w <= 0 or h <= 0 or h > w / 2:
+            raise ValueError(f"weld {k}: need 0 < height ≤ width/2, got width {w}, height {h}")
+        pts[k] = p
+        dirs[k] = (math.cos(ang), math.sin(ang))
+        widths[k], heights[k], half[k] = w, h, float(hf)
+    tex = rng.normal(size=(128, 128))
+    # Mild smoothing so that bilinear look-ups give streaks rather than salt and pepper.
+    tex = 0.5 * tex + 0.25 * (np.roll(tex, 1, 0) + np.roll(tex, -1, 0))
+    tex /= tex.std()
+    curvature = 0.0 if not math.isfinite(radius_mm) else 1.0 / radius_mm
+    return World(
+        points=pts,
+        dirs=dirs,
+        widths=widths,
+        heights=heights,
+        half=half,
+        curvature=np.asarray(curvature),
+        texture=tex,
+        brush_angle=np.asarray(rng.uniform(0, np.pi)),
+    )
+
+
+def random_world(kind: str, rng=None, *, radius_mm: float = math.inf) -> World:
+    """A random straight weld or T-intersection on a plate.
+
+    "straight": weld 0 runs through the origin along x_w (± 8°). "cross": weld 0 ends at the
+    junction J = origin coming from −x_w (the stem the robot follows), weld 1 (the bar)
+    crosses it at 90° ± 8°. Widths 10–25 mm, heights 1–3 mm.
+    """
+    rng = _rng(rng)
+    if kind not in ("straight", "cross"):
+        raise ValueError(f"kind must be 'straight' or 'cross', got {kind!r}")
+    phi = np.deg2rad(rng.uniform(-8, 8))
+
+    def bead():
+        w = rng.uniform(10, 25)
+        return w, min(rng.uniform(1, 3), w / 2)
+
+    if kind == "straight":
+        w, h = bead()
+        welds = [((0.0, 0.0), phi, w, h, False)]
+    else:
+        w0, h0 = bead()
+        w1, h1 = bead()
+        bar = phi + np.pi / 2 + np.deg2rad(rng.uniform(-8, 8))
+        welds = [((0.0, 0.0), phi + np.pi, w0, h0, True), ((0.0, 0.0), bar, w1, h1, False)]
+    return make_world(welds, radius_mm=radius_mm, rng=rng)
+
+
+def random_pose(world: World, kind: str, rng=None, sensor: Sensor | None = None) -> RobotPose:
+    """A robot pose that puts the followed weld (weld 0) under the horizontal stripe.
+
+    Lateral offset ±20 mm, heading ±8° from the weld, roll/pitch ±2°, stand-off ±10 mm.
+    For "cross" the junction lies ahead of the horizontal stripe and on the vertical one,
+    so that both stripes cross a bead.
+    """
+    rng = _rng(rng)
+    sensor = sensor or default_sensor()
+    dirs = np.asarray(world.dirs, float)
+    ang = math.atan2(dirs[0, 1], dirs[0, 0])
+    if kind == "cross":
+        ang += math.pi  # weld 0 is stored pointing back from the junction
+    heading = ang + np.deg2rad(rng.uniform(-8, 8) if kind == "straight" else rng.uniform(-5, 5))
+    lateral = rng.uniform(-20, 20) if kind == "straight" else rng.uniform(-12, 12)
+    x_stripe = float(np.asarray(sensor.T_cr)[0])
+    if kind == "straight":
+        along = rng.uniform(-300, 300)
+    else:
+        # Junction between 30 mm and 60 mm ahead of the horizontal stripe (the vertical
+        # stripe sees about 60 mm ahead of it on the default rig).
+        along = -(x_stripe + rng.uniform(30, 60))
+    e = np.array([math.cos(ang), math.sin(ang)])
+    n = np.array([-e[1], e[0]])
+    p = np.asarray(world.points, float)[0] + along * e - lateral * n
+    return RobotPose(
+        float(p[0]),
+        float(p[1]),
+        float(heading),
+        float(rng.uniform(-10, 10)),
+        float(np.deg2rad(rng.uniform(-2, 2))),
+        float(np.deg2rad(rng.uniform(-2, 2))),
+    )
+
+
+# ----------------------------------------------------------------------------- one frame
+
+
+def _as_f32(tree):
+    return jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x, jnp.float32) if eqx.is_inexact_array_like(x) else x, tree
+    )
+
+
+@eqx.filter_jit
+def _render_kernel(sensor, world, pose, nz, cond, key, ss):
+    bg, laser, _ = surface_radiance(sensor, world, pose, nz, cond, ss)
+    return quantise(expose(bg, laser, nz, key))
+
+
+def _nz_arrays(nz: Nuisance) -> Nuisance:
+    return Nuisance(*[jnp.asarray(v, jnp.float32) for v in nz])
+
+
+def render_image(
+    sensor: Sensor,
+    world: World,
+    pose: RobotPose,
+    nuisance: str | Nuisance = "clean",
+    seed: int = 0,
+    *,
+    scene_seed: int | None = None,
+    supersample: int = 1,
+) -> np.ndarray:
+    """The rendered RGB uint8 (H, W, 3) image alone (no ground truth); see `render_frame`."""
+    nz = _nuisance(nuisance, np.random.default_rng(seed))
+    scene_rng = np.random.default_rng([17, seed if scene_seed is None else scene_seed])
+    cond = draw_conditions(scene_rng, world, nz)
+    key = jax.random.key(int(seed) % (2**31))
+    img = _render_kernel(
+        _as_f32(sensor),
+        _as_f32(world),
+        RobotPose(*[jnp.float32(v) for v in pose]),
+        _nz_arrays(nz),
+        _as_f32(Conditions(*[np.asarray(c) for c in cond])),
+        key,
+        int(supersample),
+    )
+    return np.array(img)
+
+
+def render_frame(
+    sensor: Sensor,
+    world: World,
+    pose: RobotPose,
+    nuisance: str | Nuisance = "clean",
+    seed: int = 0,
+    *,
+    scene_seed: int | None = None,
+    supersample: int = 1,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Render one frame and its exact ground truth.
+
+    Args:
+        sensor: the cross structured-light sensor (camera, planes, camera→robot transform).
+        world: the wall and its welds.
+        pose: the robot's pose on the wall.
+        nuisance: a preset name of `NUISANCES` (or "mixed") or a `Nuisance`.
+        seed: seeds the noise and speckle (and the scene conditions unless `scene_seed`).
+        scene_seed: seeds the sun direction and shadow edges; keep it fixed over a video.
+        supersample: rays per pixel along each axis (area integration).
+
+    Returns:
+        image: RGB uint8 (H, W, 3).
+        gt: `h_v` (W,), `h_xyz` (W, 3), `v_u` (H,), `v_xyz` (H, 3) (camera frame, mm; NaN
+        where absent), `pose` (6,), and the tracking truth of `true_weld_line`
+        (`offset_mm`, `heading_deg`, `junction_x_mm`, `bead_width_mm`, `bead_height_mm`).
+    """
+    nz = _nuisance(nuisance, np.random.default_rng(seed))
+    image = render_image(
+        sensor, world, pose, nz, seed, scene_seed=scene_seed, supersample=supersample
+    )
+    h_v, h_xyz, v_u, v_xyz = stripe_truth(sensor, world, pose, nz.fan_half_deg)
+    gt = dict(h_v=h_v, h_xyz=h_xyz, v_u=v_u, v_xyz=v_xyz, pose=np.asarray(pose, float))
+    line = true_weld_line(world, pose, sensor)
+    gt.update({k: np.asarray(v, float) for k, v in line.items()})
+    return image, gt
+
+
+def _stack_gt(gts: list[dict]) -> dict[str, np.ndarray]:
+    return {k: np.stack([g[k] for g in gts]) for k in gts[0]}
+
+
+def render_dataset(
+    kind: str,
+    nuisance: str | Nuisance = "clean",
+    n_frames: int = 10,
+    seed: int = 0,
+    sensor: Sensor | None = None,
+    *,
+    progress: bool = False,
+    supersample: int = 1,
+    laser: str | tuple[float, float, float] | None = None,
+    power: float | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray], Sensor]:
+    """Render `n_frames` independent random scenes of one kind ("straight" or "cross").
+
+    Frame i uses the generator `default_rng([seed, i])` for its world and pose, so a data
+    set is reproducible and its frames do not depend on `n_frames`.
+
+    Returns:
+        images (F, H, W, 3) uint8, the ground truth of `render_frame` stacked on a leading
+        frame axis, and the sensor.
+    """
+    sensor = sensor or default_sensor()
+    images, gts = [], []
+    it = range(n_frames)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc=f"render {kind}/{nuisance if isinstance(nuisance, str) else 'custom'}")
+    for i in it:
+        rng = np.random.default_rng([seed, i])
+        world = random_world(kind, rng)
+        pose = random_pose(world, kind, rng, sensor)
+        nz = _with_laser(_nuisance(nuisance, rng), laser, power)
+        img, gt = render_frame(sensor, world, pose, nz, seed=int(rng.integers(2**31)))
+        images.append(img)
+        gts.append(gt)
+    return np.stack(images), _stack_gt(gts), sensor
+
+
+def _with_laser(nz: Nuisance, laser, power) -> Nuisance:
+    if laser is not None:
+        rgb = LASER_RGB[laser] if isinstance(laser, str) else tuple(float(c) for c in laser)
+        nz = nz._replace(laser_rgb=rgb)
+    if power is not None:
+        nz = nz._replace(laser_power=float(power))
+    return nz
+
+
+# ----------------------------------------------------------------------------- tracking truth
+
+
+def _plane_in_robot(sensor: Sensor, i: int) -> tuple[np.ndarray, float]:
+    """Plane i as n_r·X_r + d_r = 0 in the robot frame."""
+    n = np.asarray(sensor.planes, float)[i]
+    R = np.asarray(sensor.R_cr, float)
+    T = np.asarray(sensor.T_cr, float)
+    n_r = R @ n
+    return n_r, 1.0 - n_r @ T
+
+
+def _welds_in_robot(world: World, pose: RobotPose):
+    p = np.asarray(pose, float)
+    from ._synth_scene import _np_rot_x, _np_rot_y, _np_rot_z
+
+    R = _np_rot_z(p[2]) @ _np_rot_y(p[5]) @ _np_rot_x(p[4])
+    t = np.array([p[0], p[1], p[3]])
+    pts = np.asarray(world.points, float)
+    dirs = np.asarray(world.dirs, float)
+    P = (np.concatenate([pts, np.zeros((len(pts), 1))], 1) - t) @ R
+    D = np.concatenate([dirs, np.zeros((len(pts), 1))], 1) @ R
+    return P, D
+
+
+def true_weld_line(
+    world: World, pose: RobotPose, sensor: Sensor | None = None, follow: int = 0, crossing: int = 1
+) -> dict[str, float]:
+    """Tracking ground truth in the robot frame (DESIGN.md, "Tracking log").
+
+    The followed weld's centre line (on the wall, z_w = 0) meets laser plane 0 at one point:
+    `offset_mm` is its y_r (positive: weld to the robot's left) and `stripe_x_mm` its x_r;
+    `heading_deg` is the weld's direction in the x_r–y_r plane relative to x_r
+    (counter-clockwise positive, in (−90°, 90°]); `junction_x_mm` is the x_r where the
+    crossing weld's centre line meets plane 1 (the vertical stripe), NaN without one.
+    `bead_width_mm`, `bead_height_mm` describe the followed weld.
+    """
+    sensor = sensor or default_sensor()
+    P, D = _welds_in_robot(world, pose)
+    heights = np.asarray(world.heights, float)
+    widths = np.asarray(world.widths, float)
+
+    def meet(k, i):
+        n_r, d_r = _plane_in_robot(sensor, i)
+        den = n_r @ D[k]
+        if abs(den) < 1e-12:
+            return np.full(3, np.nan)
+        return P[k] - D[k] * (n_r @ P[k] + d_r) / den
+
+    X = meet(follow, 0)
+    dx, dy = D[follow, 0], D[follow, 1]
+    if dx < 0 or (dx == 0 and dy < 0):
+        dx, dy = -dx, -dy
+    junction = np.nan
+    if 0 <= crossing < len(heights) and heights[crossing] > 0 and crossing != follow:
+        junction = float(meet(crossing, 1)[0])
+    return dict(
+        offset_mm=float(X[1]),
+        stripe_x_mm=float(X[0]),
+        heading_deg=float(np.degrees(np.arctan2(dy, dx))),
+        junction_x_mm=junction,
+        bead_width_mm=float(widths[follow]),
+        bead_height_mm=float(heights[follow]),
+    )
+
+
+# ----------------------------------------------------------------------------- video
+
+
+def _video_path(n_frames, speed, fps, turn_radius, lookahead, turn_sign, rng):
+    """Poses of a look-ahead point driving along the stem (−x_w → J) and turning onto the bar.
+
+    The nominal path runs along y = 0 towards x = −turn_radius, follows a quarter circle
+    onto the line x = 0 (the bar) and continues along it; a lateral wobble and a heading
+    wobble are added. Returns (look-ahead xy (F, 2), heading (F,), on_bar (F,) bool).
+    """
+    L = n_frames * speed / fps
+    arc = 0.5 * math.pi * turn_radius
+    # s = 0 where the arc starts; the arc's middle is at mid-video.
+    s = np.arange(n_frames) * speed / fps - 0.5 * L + 0.5 * arc
+    xy = np.zeros((n_frames, 2))
+    tang = np.zeros(n_frames)
+    for i, si in enumerate(s):
+        if si < 0:
+            xy[i] = (-turn_radius + si, 0.0)
+            tang[i] = 0.0
+        elif si < arc:
+            a = si / turn_radius
+            xy[i] = (
+                -turn_radius + turn_radius * math.sin(a),
+                turn_sign * turn_radius * (1 - math.cos(a)),
+            )
+            tang[i] = turn_sign * a
+        else:
+            xy[i] = (0.0, turn_sign * (turn_radius + si - arc))
+            tang[i] = turn_sign * math.pi / 2
+    phase = rng.uniform(0, 2 * np.pi, 2)
+    wobble = 4.0 * np.sin(2 * np.pi * s / 170.0 + phase[0])
+    normal = np.stack([-np.sin(tang), np.cos(tang)], 1)
+    xy = xy + wobble[:, None] * normal
+    heading = tang + np.deg2rad(2.5) * np.sin(2 * np.pi * s / 230.0 + phase[1])
+    return xy, heading, s > 0.5 * arc
+
+
+def render_video(
+    sensor: Sensor | None = None,
+    n_frames: int = 200,
+    seed: int = 0,
+    nuisance: str | Nuisance = "clean",
+    speed_mm_s: float = 30.0,
+    fps: float = 20.0,
+    *,
+    progress: bool = False,
+    laser: str | tuple[float, float, float] | None = None,
+    power: float | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray, dict[str, np.ndarray]]:
+    """A robot drives along a weld towards a T-intersection and turns onto the crossing weld.
+
+    The look-ahead point (where the horizontal stripe meets the wall) follows the stem, turns
+    on a 60 mm quarter circle at the junction and follows the bar, with a ±4 mm lateral and
+    ±2.5° heading wobble; the robot moves `speed_mm_s / fps` mm per frame. The sun and
+    shadow stay fixed (relative to the robot) over the video; noise changes per frame.
+
+    Returns:
+        frames (F, H, W, 3) uint8; gt (the per-frame ground truth of `render_frame`, stacked,
+        plus `t_s` and `followed`); poses (F, 6) as `RobotPose` fields; lines: per frame
+        `offset_mm`, `heading_deg`, `junction_x_mm`, `followed` (index of the weld followed)
+        and the world's weld centre lines `weld_points` (K, 2), `weld_dirs` (K, 2).
+    """
+    sensor = sensor or default_sensor()
+    rng = np.random.default_rng([seed, 999])
+    w0, h0 = rng.uniform(12, 22), rng.uniform(1.5, 3)
+    w1, h1 = rng.uniform(12, 22), rng.uniform(1.5, 3)
+    world = make_world(
+        [((0.0, 0.0), math.pi, w0, h0, True), ((0.0, 0.0), math.pi / 2, w1, h1, False)],
+        rng=rng,
+    )
+    turn_sign = float(rng.choice([-1, 1]))
+    lookahead = float(np.asarray(sensor.T_cr)[0])
+    xy, heading, on_bar = _video_path(n_frames, speed_mm_s, fps, 60.0, lookahead, turn_sign, rng)
+    nz = _with_laser(_nuisance(nuisance, rng), laser, power)
+    frames, gts, poses = [], [], []
+    it = range(n_frames)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="render video")
+    for i in it:
+        ref = xy[i] - lookahead * np.array([math.cos(heading[i]), math.sin(heading[i])])
+        pose = RobotPose(float(ref[0]), float(ref[1]), float(heading[i]))
+        img, gt = render_frame(sensor, world, pose, nz, seed=seed * 100003 + i, scene_seed=seed)
+        follow, crossing = (1, -1) if on_bar[i] else (0, 1)
+        gt.update(
+            {
+                k: np.asarray(v, float)
+                for k, v in true_weld_line(world, pose, sensor, follow, crossing).items()
+            }
+        )
+        gt["followed"] = np.asarray(follow)
+        gt["t_s"] = np.asarray(i / fps)
+        frames.append(img)
+        gts.append(gt)
+        poses.append(np.asarray(pose, float))
+    gt = _stack_gt(gts)
+    lines = dict(
+        offset_mm=gt["offset_mm"],
+        heading_deg=gt["heading_deg"],
+        junction_x_mm=gt["junction_x_mm"],
+        followed=gt["followed"],
+        weld_points=np.asarray(world.points, float),
+        weld_dirs=np.asarray(world.dirs, float),
+        weld_widths=np.asarray(world.widths, float),
+        weld_heights=np.asarray(world.heights, float),
+    )
+    return np.stack(frames), gt, np.stack(poses), lines
+
+
+# ----------------------------------------------------------------------------- calibration
+
+
+def _rodrigues(v):
+    th = np.linalg.norm(v)
+    if th < 1e-12:
+        return np.eye(3)
+    k = v / th
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
+
+
+def _board_poses(sensor, n, rng, pattern, square):
+    cols, rows = pattern
+    cam = sensor.camera
+    W, H = cam.image_size
+    P = np.asarray(_projector(sensor))
+    d = np.asarray(_axis(sensor))
+    outline = np.array([[-1, -1, 0], [cols, -1, 0], [-1, rows, 0], [cols, rows, 0]], float) * square
+    centre = np.array([(cols - 1) / 2, (rows - 1) / 2, 0.0]) * square
+    Rs, ts = [], []
+    while len(Rs) < n:
+        R = _rodrigues(
+            np.array([np.deg2rad(rng.uniform(-28, 28)), np.deg2rad(rng.uniform(-28, 28)), 0.0])
+        ) @ _rodrigues(np.array([0.0, 0.0, np.deg2rad(rng.uniform(-12, 12))]))
+        z = rng.uniform(470, 650)
+        target = np.array([rng.uniform(-0.12, 0.12) * z, rng.uniform(-0.1, 0.1) * z, z])
+        t = target - R @ centre
+        X = outline @ R.T + t
+        uv = np.asarray(project(jnp.asarray(X), cam))
+        if not (np.all(uv[:, 0] > 8) and np.all(uv[:, 0] < W - 9)):
+            continue
+        if not (np.all(uv[:, 1] > 8) and np.all(uv[:, 1] < H - 9)):
+            continue
+        # Both stripes cross the board when the projector's axis hits its inner squares.
+        nb = R[:, 2]
+        s = (nb @ t - nb @ P) / (nb @ d)
+        Xb = R.T @ (P + s * d - t)
+        if not (0.5 * square < Xb[0] < (cols - 1.5) * square):
+            continue
+        if not (0.5 * square < Xb[1] < (rows - 1.5) * square):
+            continue
+        Rs.append(R)
+        ts.append(t)
+    return np.stack(Rs), np.stack(ts)
+
+
+def _projector(sensor):
+    from ._synth_scene import projector_origin
+
+    return projector_origin(sensor)
+
+
+def _axis(sensor):
+    from ._synth_scene import projector_axis
+
+    return projector_axis(sensor)
+
+
+@eqx.filter_jit
+def _checker_kernel(sensor, R, t, nz, key, laser_on, pattern, square, ss):
+    bg, laser = checkerboard_radiance(sensor, R, t, laser_on, nz, pattern, square, ss)
+    return quantise(expose(bg, laser, nz, key))
+
+
+def render_calibration(
+    sensor: Sensor | None = None,
+    n_poses: int = 15,
+    seed: int = 0,
+    pattern: tuple[int, int] = (10, 7),
+    square_mm: float = 25.0,
+    *,
+    nuisance: Nuisance | None = None,
+    supersample: int = 4,
+    progress: bool = False,
+) -> dict[str, np.ndarray]:
+    """Checkerboard images in random poses, each without and with the laser (paper, 2.3).
+
+    The board (cols × rows inner corners at (i·square, j·square, 0), i fastest) is rendered
+    with `supersample`² rays per pixel through the distorted lens, 470–650 mm away, tilted
+    up to 28°, and posed so that both laser stripes cross it.
+
+    Returns:
+        `plain`, `laser` (F, H, W, 3) uint8; `R` (F, 3, 3), `t` (F, 3) the true board→camera
+        poses (X_c = R X_b + t, OpenCV convention); `object_points` (N, 3);
+        `image_points` (F, N, 2) the true distorted projections of the corners.
+    """
+    sensor = sensor or default_sensor()
+    rng = np.random.default_rng([seed, 555])
+    nz = nuisance or Nuisance(ambient=240.0, laser_power=200.0, speckle=0.3, texture=0.0)
+    cols, rows = pattern
+    obj = np.zeros((cols * rows, 3))
+    obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square_mm
+    Rs, ts = _board_poses(sensor, n_poses, rng, pattern, square_mm)
+    s32 = _as_f32(sensor)
+    nz32 = _nz_arrays(nz)
+    plain, laser, img_pts = [], [], []
+    it = range(n_poses)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc="render calibration")
+    for i in it:
+        R32, t32 = jnp.asarray(Rs[i], jnp.float32), jnp.asarray(ts[i], jnp.float32)
+        for on, out in ((False, plain), (True, laser)):
+            key = jax.random.key(int(seed) * 7919 + 2 * i + int(on))
+            out.append(
+                np.array(
+                    _checker_kernel(
+                        s32, R32, t32, nz32, key, on, tuple(pattern), float(square_mm), supersample
+                    )
+                )
+            )
+        img_pts.append(np.asarray(project(jnp.asarray(obj @ Rs[i].T + ts[i]), sensor.camera)))
+    return dict(
+        plain=np.stack(plain),
+        laser=np.stack(laser),
+        R=Rs,
+        t=ts,
+        object_points=obj,
+        image_points=np.stack(img_pts),
+    )
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def _write_npz(path: str, arrays: dict[str, np.ndarray]) -> None:
+    """np.savez with fixed zip timestamps, so the same arrays give the same bytes."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, arr in arrays.items():
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.asanyarray(arr), allow_pickle=False)
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            zf.writestr(info, data.getvalue())
+    with open(path, "wb") as f:
+        f.write(buf.getvalue())
+
+
+def write_dataset(
+    out_dir: str | os.PathLike,
+    images: np.ndarray,
+    gt: dict[str, Any],
+    sensor: Sensor,
+    names: list[str] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> list[str]:
+    """Write rendered data per DESIGN.md (Contracts): PNG frames, `sensor.json`, `gt.npz`.
+
+    Args:
+        out_dir: created if missing.
+        images: (F, H, W, 3) uint8 RGB.
+        gt: arrays with a leading frame axis (`h_v`, `h_xyz`, `v_u`, `v_xyz`, …) or any other
+            arrays (calibration poses); written to `gt.npz` with `frames` (the file names).
+        sensor: the true calibration, written as `sensor.json`.
+        names: PNG file names (default `frame_00000.png`, …).
+        extra: more arrays for `gt.npz`.
+
+    Returns:
+        The file names of the frames.
+    """
+    import cv2
+
+    images = np.asarray(images)
+    if images.ndim != 4 or images.shape[-1] != 3 or images.dtype != np.uint8:
+        raise ValueError(f"images must be (F, H, W, 3) uint8, got {images.shape} {images.dtype}")
+    names = list(names) if names is not None else [f"frame_{i:05d}.png" for i in range(len(images))]
+    if len(names) != len(images):
+        raise ValueError(f"{len(names)} names for {len(images)} images")
+    os.makedirs(out_dir, exist_ok=True)
+    for name, img in zip(names, images, strict=True):
+        if not cv2.imwrite(os.path.join(out_dir, name), np.ascontiguousarray(img[..., ::-1])):
+            raise OSError(f"cannot write {os.path.join(out_dir, name)}")
+    save_sensor(sensor, os.path.join(out_dir, "sensor.json"))
+    arrays = {k: np.asarray(v) for k, v in gt.items()}
+    arrays.update({k: np.asarray(v) for k, v in (extra or {}).items()})
+    arrays["frames"] = np.asarray(names, dtype=str)
+    _write_npz(os.path.join(out_dir, "gt.npz"), arrays)
+    return names
+
+
+def load_dataset(directory: str | os.PathLike) -> tuple[np.ndarray, dict[str, np.ndarray], Sensor]:
+    """Read a directory written by `write_dataset` / `cslx render`: (images, gt, sensor).
+
+    Raises:
+        FileNotFoundError: the directory, `gt.npz`, `sensor.json` or a listed frame is missing.
+    """
+    import cv2
+
+    directory = os.fspath(directory)
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(f"{directory}: no such data set directory")
+    gt_path = os.path.join(directory, "gt.npz")
+    if not os.path.exists(gt_path):
+        raise FileNotFoundError(f"{gt_path}: missing (not a `cslx render` output?)")
+    with np.load(gt_path, allow_pickle=False) as z:
+        gt = {k: z[k] for k in z.files}
+    if "frames" not in gt:
+        raise ValueError(f"{gt_path}: no 'frames' array naming the PNG files")
+    images = []
+    for name in gt["frames"]:
+        p = os.path.join(directory, str(name))
+        img = cv2.imread(p, cv2.IMREAD_COLOR)
+        if img is None:
+            raise FileNotFoundError(f"{p}: frame listed in gt.npz is missing or unreadable")
+        images.append(img[..., ::-1])
+    sensor = load_sensor(os.path.join(directory, "sensor.json"))
+    return np.ascontiguousarray(np.stack(images)), gt, sensor
