@@ -319,12 +319,16 @@ def test_border_spike_guard():
 def test_float32_agrees_with_float64():
     h, w = 96, 80
     I = stripe_image(h, w, wavy_centre(h, w), speckle=0.2, seed=6)
-    r64 = med(jnp.asarray(I, jnp.float64), init="impulse", loading=1e-5, tol=1e-7, max_steps=60)
-    r32 = med(jnp.asarray(I, jnp.float32), init="impulse", loading=1e-5, tol=1e-7, max_steps=60)
+    r64 = med(jnp.asarray(I, jnp.float64), init="impulse", loading=1e-5)
+    r32 = med(jnp.asarray(I, jnp.float32), init="impulse", loading=1e-5)
     assert r32.output.dtype == jnp.float32 and r32.filter.dtype == jnp.float32
-    # float32 rounding (1e-7) amplified by the conditioning of R (loading 1e-5): ~1e-4.
-    np.testing.assert_allclose(np.asarray(r32.filter), np.asarray(r64.filter), atol=2e-3)
-    assert abs(float(r32.delay) - float(r64.delay)) < 0.02
+    assert int(r32.steps) == int(r64.steps)
+    # Same loading, same number of steps: float32 rounding (6e-8) amplified by the
+    # conditioning of R gives ~1e-6 on the filter (measured 1.0e-6; DESIGN.md: 6e-6).
+    np.testing.assert_allclose(np.asarray(r32.filter), np.asarray(r64.filter), atol=2e-5)
+    scale = float(jnp.max(jnp.abs(r64.output)))
+    np.testing.assert_allclose(np.asarray(r32.output), np.asarray(r64.output), atol=5e-5 * scale)
+    assert abs(float(r32.delay) - float(r64.delay)) < 1e-3
 
 
 def test_bad_inputs_raise_clear_errors():
