@@ -92,9 +92,9 @@ def test_column_kurtosis_matches_scipy():
     I = rng.gamma(2.0, size=(50, 7)) ** 2
     I[:, 3] = 5.0  # a constant column: neutral value, no NaN
     norm = np.asarray(column_kurtosis(jnp.asarray(I), "normalized"))
-    ref = scipy.stats.kurtosis(I, axis=0, fisher=True, bias=True)
     ok = np.arange(7) != 3
-    np.testing.assert_allclose(norm[ok], ref[ok], rtol=1e-12)
+    ref = scipy.stats.kurtosis(I[:, ok], axis=0, fisher=True, bias=True)
+    np.testing.assert_allclose(norm[ok], ref, rtol=1e-12)
     assert norm[3] == 0.0
     paper = np.asarray(column_kurtosis(jnp.asarray(I), "paper"))
     np.testing.assert_allclose(paper, (norm + 3) / 50, rtol=1e-12)  # the missing factor M
