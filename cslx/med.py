@@ -66,7 +66,6 @@ strings and ints are static) and vmap-able over frames. Float32 is the speed pat
 
 from __future__ import annotations
 
-import functools
 from typing import Literal
 
 import equinox as eqx
@@ -187,7 +186,7 @@ def _kurtosis_change(scaled_error):
     return jnp.abs(scaled_error[1]).astype(jnp.result_type(float))
 
 
-@functools.partial(eqx.filter_jit)
+@eqx.filter_jit
 def _med(I, W0, axis, L, taper, tol, max_steps, loading):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
 
@@ -249,7 +248,7 @@ def med(
     return _med(I, W0, axis, L, int(taper), float(tol), int(max_steps), loading)
 
 
-@functools.partial(eqx.filter_jit)
+@eqx.filter_jit
 def _apply(I, W, axis, taper):
     pb = med_prepare(I, axis=axis, L=W.shape[0], taper=taper)
     st = _f.stats(W, pb)
