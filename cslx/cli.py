@@ -9,8 +9,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
+
+# OpenBLAS's threaded Cholesky (the MED Toeplitz solve for L > 256) was 100–1000× slower than
+# single-threaded on a loaded 2-core machine; XLA does its own threading. Set before NumPy loads.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from . import commands as _commands
 

@@ -3,7 +3,9 @@
 import os
 import pathlib
 
-import jax
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # see cslx.cli: threaded Cholesky stalls
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 # One compile cache for all xdist workers: repeated jit compiles across tests are the slow part.
