@@ -291,3 +291,56 @@ def test_fit_rigid_with_noise_and_reflection():
     assert res_m.max() > 1.0
     with pytest.raises(CalibrationError, match="collinear"):
         fit_rigid(np.outer(np.arange(5.0), [1, 1, 1]), np.outer(np.arange(5.0), [1, 0, 0]))
+
+
+# ----------------------------------------------------------------------------- command line
+
+
+def test_cli_camera_only_and_missing_laser_images(tmp_path, capsys):
+    from cslx.cli import main
+
+    out = tmp_path / "cam.json"
+    args = ["calibrate", "--images", str(DATA), "--pattern", "9x6", "--square", "1"]
+    assert main([*args, "--out", str(out)]) == 2
+    assert "--laser-images is required" in capsys.readouterr().err
+    assert main([*args, "--camera-only", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    ref = json.loads((DATA / "reference.json").read_text())["k1k2p1p2 (flags=CALIB_FIX_K3)"]
+    assert data["camera_only"] is True and "planes" not in data
+    assert data["rms_px"] == pytest.approx(ref["rms"], abs=1e-3)
+    assert len(data["per_image_rms_px"]) == 13
+    with pytest.raises(CalibrationError, match="planes"):
+        from cslx.sensor import load_sensor
+
+        load_sensor(out)
+    assert main([*args, "--pattern", "9by6", "--camera-only", "--out", str(out)]) == 2
+
+
+@pytest.mark.slow
+def test_cli_on_rendered_boards(tmp_path):
+    """Render plain + laser boards with the true sensor, run `cslx calibrate`, compare."""
+    from cslx.cli import main
+    from cslx.sensor import default_sensor, load_sensor
+    from cslx.synth import render_calibration
+
+    true = default_sensor()
+    d = render_calibration(true, n_poses=6, seed=4, supersample=1)
+    for sub, key in (("plain", "plain"), ("laser", "laser")):
+        (tmp_path / sub).mkdir()
+        for i, im in enumerate(d[key]):
+            cv2.imwrite(str(tmp_path / sub / f"{i:02d}.png"), im[..., ::-1])
+    rob = tmp_path / "robot.csv"
+    R = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    P = np.random.default_rng(0).uniform(-100, 100, (6, 3)) + [0, 0, 300]
+    np.savetxt(rob, np.hstack([P, P @ R.T + [150, 0, 230]]), delimiter=",",
+               header="x_c,y_c,z_c,x_r,y_r,z_r", comments="")  # fmt: skip
+    out = tmp_path / "sensor.json"
+    rc = main(["calibrate", "--images", str(tmp_path / "plain"), "--laser-images",
+               str(tmp_path / "laser"), "--robot-points", str(rob), "--out", str(out)])  # fmt: skip
+    assert rc == 0
+    s = load_sensor(out)
+    assert float(s.camera.fx) == pytest.approx(float(true.camera.fx), rel=5e-3)
+    assert float(s.camera.fy) == pytest.approx(float(true.camera.fy), rel=5e-3)
+    for k in range(2):
+        assert plane_angle_deg(s.planes[k], true.planes[k]) < 0.3
+    np.testing.assert_allclose(np.asarray(s.R_cr), R, atol=1e-9)
