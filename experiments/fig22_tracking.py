@@ -5,7 +5,7 @@ pseudo-terminal, lock-step mode) starts beside a weld (the stem) that ends at a
 T-intersection with a crossing weld (the bar). Every step:
 
 1. the frame its camera sees from the simulator's true pose is rendered with the nuisances
-   (`cslx.synth.render_frame`, default rig);
+   (`cslx.synth.render_image`, default rig);
 2. the compiled tracker (`cslx.tracker.Tracker`) estimates the weld line, with the
    odometry from the robot's telemetry received over the link;
 3. the path controller (`cslx.robot.PathController`: follow, approach the junction, turn
@@ -142,7 +142,7 @@ def run_closed_loop(
     )
     from cslx.robot.controller import State
     from cslx.sensor import default_sensor
-    from cslx.synth import RobotPose, render_frame
+    from cslx.synth import RobotPose, render_image
     from cslx.tracker import Tracker
 
     sensor = default_sensor()
@@ -171,7 +171,8 @@ def run_closed_loop(
         for i in it:
             pose = sim.pose()
             t0 = time.perf_counter()
-            img, _ = render_frame(
+            # the image only: the stripes' ground truth is not needed here (true_weld_line is)
+            img = render_image(
                 sensor, world, RobotPose(*pose), nuisance, seed=seed * 100003 + i, scene_seed=seed
             )
             t1 = time.perf_counter()
