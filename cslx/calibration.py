@@ -59,6 +59,7 @@ __all__ = [
     "calibrate_planes",
     "edge_crossings",
     "lift_to_board",
+    "on_board",
     "stripe_pixels",
     "rodrigues",
     "rotation_to_rvec",
@@ -579,21 +580,32 @@ def lift_to_board(
 
 
 def board_mask(
-    camera: Camera, R: ArrayLike, t: ArrayLike, pattern: tuple[int, int], square: float
+    camera: Camera,
+    R: ArrayLike,
+    t: ArrayLike,
+    pattern: tuple[int, int],
+    square: float,
+    extent: float = 1.0,
 ) -> np.ndarray:
-    """(H, W) bool: the image of the rectangle spanned by the inner corners of pose (R, t)."""
+    """(H, W) bool: the image of the board of pose (R, t).
+
+    The region is the rectangle of the inner corners grown by `extent` squares on every side
+    (1: the outer row of squares of a chessboard, which every chessboard has).
+    """
     import cv2
 
     cols, rows = pattern
     w, h = camera.image_size
     s = np.linspace(0, 1, 40)
-    X, Y = (cols - 1) * square, (rows - 1) * square
+    e = extent * square
+    x0, y0 = -e, -e
+    X, Y = (cols - 1) * square + 2 * e, (rows - 1) * square + 2 * e
     border = np.concatenate(
         [
-            np.stack([s * X, 0 * s], 1),
-            np.stack([X + 0 * s, s * Y], 1),
-            np.stack([(1 - s) * X, Y + 0 * s], 1),
-            np.stack([0 * s, (1 - s) * Y], 1),
+            np.stack([x0 + s * X, y0 + 0 * s], 1),
+            np.stack([x0 + X + 0 * s, y0 + s * Y], 1),
+            np.stack([x0 + (1 - s) * X, y0 + Y + 0 * s], 1),
+            np.stack([x0 + 0 * s, y0 + (1 - s) * Y], 1),
         ]
     )
     obj = np.concatenate([border, np.zeros((len(border), 1))], axis=1)
@@ -634,6 +646,20 @@ def _extract(image_rgb, stripe, mask, method):
     return np.asarray(c.pos, float), np.asarray(c.valid, bool)
 
 
+def on_board(
+    Xt: np.ndarray, pattern: tuple[int, int], square: float, extent: float, margin: float
+) -> np.ndarray:
+    """(M,) bool: board-frame points within the board grown by `extent`, less `margin`."""
+    cols, rows = pattern
+    lo = (margin - extent) * square
+    return (
+        (Xt[:, 0] >= lo)
+        & (Xt[:, 0] <= (cols - 1 + extent - margin) * square)
+        & (Xt[:, 1] >= lo)
+        & (Xt[:, 1] <= (rows - 1 + extent - margin) * square)
+    )
+
+
 def stripe_pixels(pos: np.ndarray, valid: np.ndarray, stripe: str) -> np.ndarray:
     """Per-column ("h") or per-row ("v") centres → (M, 2) pixels (u, v) of the valid ones."""
     idx = np.nonzero(valid)[0].astype(float)
@@ -671,6 +697,7 @@ def calibrate_planes(
     square: float,
     *,
     method: str = "auto",
+    extent: float = 1.0,
     margin: float = 0.25,
     min_points_per_view: int = 10,
     min_board_angle_deg: float = 2.0,
@@ -680,7 +707,8 @@ def calibrate_planes(
 
     For each view i: stripe centres (per column for the horizontal stripe, per row for the
     vertical one) inside the board's image; their rays ∩ board plane i (the pose of
-    `calib`); points within `margin` squares of the inner-corner rectangle's border dropped;
+    `calib`); points off the board (`extent` squares around the inner corners, less a
+    `margin`) dropped;
     then `fit_plane` per stripe over all views.
 
     Args:
@@ -688,7 +716,9 @@ def calibrate_planes(
         laser_images: (H, W, 3) uint8 RGB frames (or paths) with the laser on.
         pattern, square: the board (inner corners (cols, rows), square side).
         method: "simple" (`cslx._calib_stripe`), a `cslx.segment.extract` method, or "auto".
-        margin: border band of the board to ignore, in squares.
+        extent: how far the board reaches beyond the inner corners, in squares (1: the
+            outer row of squares; points beyond may fall off the board).
+        margin: band inside that border to ignore, in squares.
         min_points_per_view: fewer points on a board do not count as a view of that stripe.
         min_board_angle_deg: the boards that see a stripe must differ in orientation by at
             least this much, else the plane's tilt about the stripe is undetermined.
@@ -715,20 +745,14 @@ def calibrate_planes(
             if bgr is None:
                 raise FileNotFoundError(f"cannot read image {os.fspath(image)!r}")
             image = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-        mask = board_mask(calib.camera, Rs[i], calib.tvecs[i], pattern, square)
+        mask = board_mask(calib.camera, Rs[i], calib.tvecs[i], pattern, square, extent)
         for k, stripe in enumerate("hv"):
             pos, valid = _extract(image, stripe, mask, method)
             uv = stripe_pixels(pos, valid & np.isfinite(pos), stripe)
             if len(uv) == 0:
                 continue
             Xc, Xt = lift_to_board(uv, calib.camera, Rs[i], calib.tvecs[i])
-            m = margin * square
-            keep = (
-                (Xt[:, 0] >= m)
-                & (Xt[:, 0] <= (cols - 1) * square - m)
-                & (Xt[:, 1] >= m)
-                & (Xt[:, 1] <= (rows - 1) * square - m)
-            )
+            keep = on_board(Xt, pattern, square, extent, margin)
             counts[i, k] = int(keep.sum())
             if counts[i, k] >= min_points_per_view:
                 pts[k].append(Xc[keep])
