@@ -278,15 +278,16 @@ def expose(
 ) -> Float[Array, "h w 3"]:
     """Speckle, lens blur, shot and read noise: the sensor's signal in DN (not yet clipped)."""
     dt = bg.dtype
-    k_sp, k_shot, k_read = jax.random.split(key, 3)
+    k_sp, k_noise = jax.random.split(key)
     sp = speckle_field(k_sp, laser.shape, nz.speckle_px, dt)
     laser = laser * (1 + nz.speckle * (sp - 1))
     img = bg + laser[..., None] * jnp.asarray(nz.laser_rgb, dt)
     img = _gauss_blur_fft(img, nz.psf_px)
     img = jnp.maximum(img, 0.0)
-    shot = jnp.sqrt(img / nz.electrons_per_dn) * jax.random.normal(k_shot, img.shape, dt)
-    read = nz.read_noise * jax.random.normal(k_read, img.shape, dt)
-    return img + shot + read
+    # Shot (Poisson, Gaussian approximation) and read noise are independent: one draw with
+    # their summed variance.
+    sigma = jnp.sqrt(img / nz.electrons_per_dn + nz.read_noise**2)
+    return img + sigma * jax.random.normal(k_noise, img.shape, dt)
 
 
 def quantise(img: Float[Array, "h w 3"]) -> Array:
@@ -299,6 +300,7 @@ def quantise(img: Float[Array, "h w 3"]) -> Array:
 
 def checkerboard_radiance(
     sensor: Sensor,
+    ray: Float[Array, "hh ww 3"],
     R_bc: Float[Array, "3 3"],
     t_bc: Float[Array, 3],
     laser_on: bool,
@@ -309,13 +311,13 @@ def checkerboard_radiance(
 ) -> tuple[Float[Array, "h w 3"], Float[Array, "h w"]]:
     """A printed checkerboard (board→camera X_c = R X_b + t) on a dark wall, ss×ss supersampled.
 
+    `ray` holds the unit rays of the supersampled pixel grid (`pixel_grid`, `pixel_to_ray`),
+    computed once for all poses.
+
     The board has (cols+1)×(rows+1) squares around the inner corners (i·square, j·square, 0)
     and a white margin of half a square.
     """
-    cam = sensor.camera
     dt = sensor.planes.dtype
-    uv = pixel_grid(cam.image_size, ss, dt)
-    ray = pixel_to_ray(uv, cam)
     R = R_bc.astype(dt)
     t = t_bc.astype(dt)
     nb = R[:, 2]  # board normal in the camera frame

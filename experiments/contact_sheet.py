@@ -52,7 +52,7 @@ def main(seed: int = 3, scale: float = 0.5, out: str | None = None) -> str:
     rows = []
     t0 = time.perf_counter()
     variants = [(name, synth.NUISANCES[name]) for name in synth.NUISANCES]
-    variants.append(("red, power 4000 (core clips)", synth.Nuisance(laser_power=4000.0)))
+    variants.append(("red, power 10000 (core clips)", synth.Nuisance(laser_power=10000.0)))
     variants.append(
         (
             "green 520 nm, sunny",

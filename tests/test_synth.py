@@ -9,11 +9,12 @@ import filecmp
 import os
 
 import cv2
+import equinox as eqx
 import numpy as np
 import pytest
 
 from cslx import synth
-from cslx._synth_scene import camera_to_world, fan_angle, surface_z
+from cslx._synth_scene import bead_profile, camera_to_world, fan_angle, surface_z
 from cslx.sensor import default_sensor
 
 SENSOR = default_sensor()
@@ -105,7 +106,9 @@ def test_straight_stripe_bump_and_tracking_truth(straight_frame):
     apex = X_r[np.argmax(S)]
     line = synth.true_weld_line(world, pose, SENSOR)
     assert abs(apex[1] - line["offset_mm"]) < 0.4
-    assert abs(apex[0] - line["stripe_x_mm"]) < 0.4
+    # stripe_x is on the wall; plane 0 leans, so at the apex (height h) it lies ≈ h·tan(15–25°)
+    # away along x_r.
+    assert abs(apex[0] - line["stripe_x_mm"]) < 0.5 * h + 0.3
     # Heading: the weld's world angle minus the robot's heading (roll/pitch ≤ 2° change it
     # by well under 0.2°).
     d = np.asarray(world.dirs)[0]
@@ -120,7 +123,7 @@ def test_junction_truth_matches_vertical_stripe(cross_frame):
     Xw = _world_points(pose, gt["v_xyz"][ok])
     # The bar's apex along the vertical stripe: the point highest above the stem's cap.
     cap_bar = np.asarray(
-        synth._synth_scene.bead_profile(
+        bead_profile(
             Xw[:, :2], synth.World(*[np.asarray(a, float) for a in world.__dict__.values()])
         )[0]
     )[:, 1]
@@ -140,10 +143,12 @@ def test_nan_where_outside_fan():
     assert 0 < inside.sum() < ok.sum()
     assert np.array_equal(np.isfinite(narrow[0])[ok], inside)
     np.testing.assert_allclose(narrow[0][ok][inside], full[0][ok][inside], atol=1e-9)
-    # Off the image: lift the robot far off the wall so the horizontal stripe leaves the view.
-    far = pose._replace(standoff_mm_offset=400.0)
-    h_v = synth.stripe_truth(SENSOR, world, far)[0]
+    # Off the image: move the principal point so that the horizontal stripe (near the
+    # image centre) projects below the last row; the vertical stripe stays in view.
+    shifted = eqx.tree_at(lambda s: s.camera.v0, SENSOR, SENSOR.camera.v0 + 400.0)
+    h_v, _, v_u, _ = synth.stripe_truth(shifted, world, pose)
     assert np.all(np.isnan(h_v))
+    assert np.isfinite(v_u).sum() > 50
 
 
 def test_render_is_deterministic():
@@ -163,7 +168,7 @@ def test_laser_power_clips_core_to_white_and_green_laser():
     rng = np.random.default_rng(2)
     world = synth.random_world("straight", rng)
     pose = synth.random_pose(world, "straight", rng, SENSOR)
-    nz = synth.Nuisance(laser_power=6000.0)
+    nz = synth.Nuisance(laser_power=12000.0)
     img, gt = synth.render_frame(SENSOR, world, pose, nz, seed=1)
     u = np.arange(640)
     ok = np.isfinite(gt["h_v"])
@@ -217,17 +222,22 @@ def test_dataset_roundtrip_and_same_bytes(tmp_path):
 
 
 def test_calibration_board_corners_found_by_opencv():
-    cal = synth.render_calibration(SENSOR, n_poses=2, seed=1)
+    # Clean images (no sensor noise) for the sub-pixel accuracy check.
+    clean = synth.Nuisance(ambient=170.0, texture=0.0, read_noise=0.0, electrons_per_dn=1e9)
+    cal = synth.render_calibration(SENSOR, n_poses=2, seed=1, nuisance=clean)
     assert cal["plain"].shape == (2, 480, 640, 3) and cal["laser"].shape == (2, 480, 640, 3)
+    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     for i in range(2):
         gray = cv2.cvtColor(cal["plain"][i], cv2.COLOR_RGB2GRAY)
         found, corners = cv2.findChessboardCorners(gray, (10, 7))
         assert found
-        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-        corners = cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), crit)[:, 0]
+        corners = cv2.cornerSubPix(gray, corners, (8, 8), (-1, -1), crit).reshape(-1, 2)
         truth = cal["image_points"][i]
-        err = min(np.abs(corners - truth).max(), np.abs(corners[::-1] - truth).max())
-        assert err < 0.1, err
+        if np.abs(corners[::-1] - truth).max() < np.abs(corners - truth).max():
+            corners = corners[::-1]  # OpenCV may start from the opposite corner
+        err = np.linalg.norm(corners - truth, axis=1)
+        assert np.abs((corners - truth).mean(0)).max() < 0.02  # no pixel-convention bias
+        assert np.sqrt(np.mean(err**2)) < 0.05 and err.max() < 0.1, err.max()
         # True pose reproduces the true corners through OpenCV's projection.
         proj, _ = cv2.projectPoints(
             cal["object_points"],

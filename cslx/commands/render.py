@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--power",
         type=float,
         default=None,
-        help="laser power: peak red DN on the plate (default per preset, ≈230; >3500 clips "
+        help="laser power: peak red DN on the plate (default per preset, ≈230; >8000 clips "
         "the core to white)",
     )
     parser.add_argument(
