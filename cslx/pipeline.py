@@ -69,6 +69,8 @@ class PipelineConfig(eqx.Module):
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
     min_valid_fraction: share of columns (rows) with a centre needed to keep tracking mode.
+    median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
+        (`_clean_profile`: gross outliers out, light smoothing along the stripe).
     use_med: False skips MED (Steger on the monochrome image), for ablations.
     roi_med: run MED inside the tracking bands too. Off by default: on bands of 64–192
         samples MED's filter (L_roi 16–64, warm-started) shifted the sunny-frame centres by
@@ -97,6 +99,9 @@ class PipelineConfig(eqx.Module):
     roi_half_w: int = eqx.field(static=True, default=64)
     roi_margin: int = eqx.field(static=True, default=8)
     min_valid_fraction: float = eqx.field(static=True, default=0.5)
+    median_half: int = eqx.field(static=True, default=4)
+    outlier_mm: float = eqx.field(static=True, default=1.0)
+    smooth_half: int = eqx.field(static=True, default=3)
     use_med: bool = eqx.field(static=True, default=True)
     roi_med: bool = eqx.field(static=True, default=False)
     weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
@@ -134,7 +139,8 @@ class FrameResult(NamedTuple):
 
     centres_h: per-column centres of the horizontal stripe (W,); centres_v: per-row centres
     of the vertical stripe (H,) (OpenCV pixels; NaN where not valid). points_h (W, 3),
-    points_v (H, 3): robot-frame points, mm (NaN where not valid). feature_h / feature_v:
+    points_v (H, 3): robot-frame points, mm, after `_clean_profile` (outliers dropped,
+    lightly smoothed; NaN where not valid or dropped). feature_h / feature_v:
     the beads (`cslx.weld.WeldFeature`); junction: the T-junction flag. med_steps: (2,)
     fixed-point steps (h, v); kurtosis: (2,) excess kurtosis of the MED outputs. used_roi:
     the bands were processed (tracking mode). brightness: mean grey level of the frame
@@ -268,6 +274,35 @@ def _points(sensor: Sensor, c: Centres, axis: int, plane: int, dtype):
     return jnp.where(c.valid[:, None], X, jnp.nan)
 
 
+def _windows(x: Array, k: int, fill) -> Array:
+    """(N, 2k+1) stack of x shifted by −k..k along the first axis (``fill`` past the ends)."""
+    pad = [(k, k)] + [(0, 0)] * (x.ndim - 1)
+    xp = jnp.pad(x, pad, constant_values=fill)
+    n = x.shape[0]
+    return jnp.stack([lax.slice_in_dim(xp, j, j + n) for j in range(2 * k + 1)], axis=1)
+
+
+def _clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: PipelineConfig):
+    """Drop gross 3-D outliers and lightly smooth a stripe profile before the weld features.
+
+    A centre picked on the wrong ridge (where the stripes cross, a glint) triangulates tens
+    or hundreds of mm off the wall and splits the bead's run of high points; a point is
+    dropped when its z_r is more than ``outlier_mm`` from the median z_r of its
+    2·``median_half``+1 neighbours. The rest is averaged over 2·``smooth_half``+1 valid
+    neighbours (≈ 1–2 mm of wall, 10× narrower than a bead; the points stay on the laser
+    plane), which lowers the speckle noise of the profile by ≈ √(2·smooth_half+1).
+    """
+    z = jnp.where(valid, P[:, 2], jnp.nan)
+    med = jnp.nanmedian(_windows(z, config.median_half, jnp.nan), axis=1)
+    keep = valid & (jnp.abs(z - med) <= config.outlier_mm)
+    if config.smooth_half > 0:
+        w = _windows(keep.astype(P.dtype), config.smooth_half, 0.0)
+        X = _windows(jnp.where(keep[:, None], P, 0.0), config.smooth_half, 0.0)
+        count = jnp.sum(w, axis=1)
+        P = jnp.sum(X, axis=1) / jnp.maximum(count, 1.0)[:, None]
+    return jnp.where(keep[:, None], P, jnp.nan), keep
+
+
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     dtype = state.filter_h.dtype
@@ -284,9 +319,9 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
         ch, cv, steps, kurt, new = _full(I, state, config)
         used_roi = jnp.zeros((), bool)
     new = _next_bands(ch, cv, new, config, (height, width))
-    Ph = _points(sensor, ch, 0, 0, dtype)
-    Pv = _points(sensor, cv, 1, 1, dtype)
-    fh, fv, junction = weld_features(Ph, ch.valid, Pv, cv.valid, config.weld)
+    Ph, keep_h = _clean_profile(_points(sensor, ch, 0, 0, dtype), ch.valid, config)
+    Pv, keep_v = _clean_profile(_points(sensor, cv, 1, 1, dtype), cv.valid, config)
+    fh, fv, junction = weld_features(Ph, keep_h, Pv, keep_v, config.weld)
     result = FrameResult(
         centres_h=ch,
         centres_v=cv,
