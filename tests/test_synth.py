@@ -251,3 +251,18 @@ def test_calibration_board_corners_found_by_opencv():
         # a horizontal and a vertical band).
         rg = cal["laser"][i][..., 0].astype(int) - cal["laser"][i][..., 1]
         assert (rg > 40).any(axis=1).sum() > 100 and (rg > 40).any(axis=0).sum() > 150
+
+
+def test_video_path_turns_onto_the_crossing_weld():
+    # Path only (no rendering): the look-ahead point follows the stem, then the bar.
+    xy, heading, on_bar = synth._video_path(
+        200, 30.0, 20.0, 60.0, 150.0, 1.0, np.random.default_rng(0)
+    )
+    step = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    assert np.all(np.abs(step - 1.5) < 0.3)  # 30 mm/s at 20 fps, plus the wobble
+    assert not on_bar[0] and on_bar[-1]
+    assert abs(np.degrees(heading[-1]) - 90) < 5 and abs(np.degrees(heading[0])) < 5
+    frames, gt, poses, lines = synth.render_video(SENSOR, n_frames=2, seed=1)
+    assert frames.shape == (2, 480, 640, 3) and poses.shape == (2, 6)
+    assert np.all(np.isfinite(lines["offset_mm"])) and lines["followed"].shape == (2,)
+    assert np.isfinite(gt["h_v"]).mean() > 0.8
