@@ -6,6 +6,10 @@ most one per image row; pixel coordinates are OpenCV's (origin at the centre of 
 pixel). Unreadable images, images of another size than the calibration and frames without a
 stripe are reported on stderr; the other images are still processed, and the exit status is
 non-zero if any image failed.
+
+With more than one JAX device (GPUs, several hosts, or CPU devices forced with
+XLA_FLAGS=--xla_force_host_platform_device_count=N), the JAX methods (steger, med) with fixed
+colour weights process the images in batches sharded over all devices (`cslx.shard`).
 """
 
 from __future__ import annotations
@@ -79,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
     sigma = args.sigma if args.sigma is not None else DEFAULT_SIGMA
     header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
 
+    batched = _sharded_path(args)
     failed = 0
     try:
         out = open(args.out, "w", newline="")
@@ -105,6 +110,11 @@ def run(args: argparse.Namespace) -> int:
                 )
                 failed += 1
                 continue
+            if batched is not None:
+                batched.append((path, rgb))
+                if len(batched) >= _BATCH_PER_DEVICE * batched.n_devices:
+                    failed += _flush(batched, stripes, args, sigma, sensor, writer)
+                continue
             found = 0
             for stripe in stripes:
                 kw = {} if args.method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
@@ -128,6 +138,87 @@ def run(args: argparse.Namespace) -> int:
             if found == 0:
                 print(f"cslx extract: {path}: no stripe found", file=sys.stderr)
                 failed += 1
+        if batched:
+            failed += _flush(batched, stripes, args, sigma, sensor, writer)
     if failed:
         print(f"cslx extract: {failed} of {len(args.images)} images failed", file=sys.stderr)
     return 1 if failed else 0
+
+
+# ---------------------------------------------------------------- several devices (cslx.shard)
+_BATCH_PER_DEVICE = 16
+
+
+class _Pending(list):
+    """Images read but not yet processed by the sharded path: [(path, rgb)], in input order."""
+
+    n_devices = 1
+
+
+def _sharded_path(args: argparse.Namespace) -> _Pending | None:
+    """A pending list when the frames should be sharded over several devices, else None.
+
+    Used for the JAX methods (steger, med) with fixed colour weights when JAX sees more than
+    one device (GPUs, several hosts after `jax.distributed`, or forced CPU devices).
+    """
+    from ..colour import parse_space
+    from ..shard import JAX_METHODS, initialize_distributed
+
+    if args.method not in JAX_METHODS or parse_space(args.space) == "auto":
+        return None
+    import jax
+
+    initialize_distributed()
+    if jax.device_count() < 2:
+        return None
+    pending = _Pending()
+    pending.n_devices = jax.device_count()
+    from ..shard import device_summary
+
+    print(f"cslx extract: frames sharded over {device_summary()}", file=sys.stderr)
+    return pending
+
+
+def _flush(pending: _Pending, stripes, args, sigma, sensor, writer) -> int:
+    """Centres of the pending images with `cslx.shard.extract_batch`; rows in input order."""
+    import numpy as np
+
+    from ..segment import centres_to_pixels
+    from ..sensor import triangulate
+    from ..shard import extract_batch
+    from ..steger import Centres
+
+    rows: dict[int, list] = {i: [] for i in range(len(pending))}
+    by_shape: dict[tuple, list[int]] = {}
+    for i, (_, rgb) in enumerate(pending):
+        by_shape.setdefault(rgb.shape, []).append(i)
+    for idx in by_shape.values():
+        frames = np.stack([pending[i][1] for i in idx])
+        for stripe in stripes:
+            try:
+                c = extract_batch(frames, args.method, space=args.space, stripe=stripe, sigma=sigma)
+            except Exception as err:  # one bad batch must not lose the others
+                print(
+                    f"cslx extract: batch of {len(idx)} images: stripe {stripe}: {err}",
+                    file=sys.stderr,
+                )
+                continue
+            for k, i in enumerate(idx):
+                uv = centres_to_pixels(Centres(c.pos[k], c.valid[k], c.strength[k]), stripe)
+                uv = uv[np.all(np.isfinite(uv), axis=1)]
+                path = pending[i][0]
+                new = [[path, stripe, f"{u:.4f}", f"{v:.4f}"] for u, v in uv]
+                if sensor is not None and len(uv):
+                    xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
+                    for row, p in zip(new, xyz, strict=True):
+                        row.extend(f"{q:.4f}" for q in p)
+                rows[i].extend(new)
+    failed = 0
+    for i, (path, _) in enumerate(pending):
+        if rows[i]:
+            writer.writerows(rows[i])
+        else:
+            print(f"cslx extract: {path}: no stripe found", file=sys.stderr)
+            failed += 1
+    pending.clear()
+    return failed
