@@ -370,10 +370,13 @@ class Tracker:
         if frame is None:
             return "no frame"
         if not isinstance(frame, np.ndarray):
+            kind = type(frame).__name__
             try:
                 frame = np.asarray(frame)
             except Exception:  # noqa: BLE001
-                return f"not an image ({type(frame).__name__})"
+                return f"not an image ({kind})"
+            if frame.ndim == 0 or frame.dtype.kind not in "uifb":
+                return f"not an image ({kind})"
         if frame.shape != self.image_shape:
             return f"wrong frame shape {frame.shape}, expected {self.image_shape}"
         if frame.dtype != np.uint8:
@@ -390,7 +393,9 @@ class Tracker:
             return self._bad(obs, "black frame")
         if raw["saturated"] > 0.5:
             return self._bad(obs, f"saturated frame ({100 * raw['saturated']:.0f} % clipped)")
-        if raw["n_valid_h"] < 0.05 * width and raw["n_valid_v"] < 0.05 * height:
+        # Steger's noise floor leaves a few stray centres on a stripe-less frame (≈ 20 % of
+        # rows on uniform noise); a real stripe gives a centre in nearly every column/row.
+        if raw["n_valid_h"] < 0.3 * width and raw["n_valid_v"] < 0.3 * height:
             return self._bad(obs, "no stripe found")
 
         kf = self.filter

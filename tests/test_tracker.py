@@ -111,7 +111,9 @@ def test_closed_loop_short(tracker):
     sys.path.insert(0, str(ROOT / "experiments"))
     from fig22_tracking import run_closed_loop
 
-    res = run_closed_loop(n_frames=30, seed=3, tracker=tracker, start_offset_mm=3.0)
+    res = run_closed_loop(
+        n_frames=30, seed=3, tracker=tracker, start_offset_mm=3.0, start_heading_deg=0.0
+    )
     assert res["n_counted"] >= 25
     # starts 3 mm off: the controller reduces it while the tracker stays within ~1 mm
     assert res["mean_error_mm"] < 3.0 and res["max_error_mm"] < 4.0
