@@ -43,11 +43,11 @@ RESULTS = ROOT / "results"
 sys.path.insert(0, str(ROOT))
 
 DEFAULTS = dict(
-    n_frames=300,
+    n_frames=440,
     seed=0,
     nuisance="clean",
     fps=20.0,
-    start_before_mm=200.0,
+    start_before_mm=400.0,
     start_offset_mm=4.0,
     start_heading_deg=3.0,
     turn_rate=0.5,
