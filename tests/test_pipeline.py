@@ -29,6 +29,7 @@ def _pixel_error(result, gt):
     return np.nanmedian(eh), np.nanmedian(ev)
 
 
+@pytest.mark.slow  # ≈ 100 s cold on 2 shared cores: every stage compiles on its own
 def test_jit_equals_eager(scene):
     """The one-jit program gives the stage-by-stage result (each stage jitted on its own)."""
     sensor, config, frames = scene
