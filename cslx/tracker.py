@@ -2,7 +2,8 @@
 
 `Tracker.from_calibration(path_or_sensor)` compiles `cslx.pipeline` once at start-up (the
 compile time is logged; JAX's persistent compilation cache is used when a directory is
-given or set in the environment, `JAX_COMPILATION_CACHE_DIR`), then `step(frame)` runs one
+given (`cache_dir`, `CSLX_JAX_CACHE`, or JAX's own `JAX_COMPILATION_CACHE_DIR`), so a second
+start-up loads the program instead of compiling it), then `step(frame)` runs one
 frame: the pipeline state (MED filters warm-started frame to frame, the tracking bands) stays
 on the device, and one small vector (`cslx.pipeline.SUMMARY_FIELDS`) comes back to the host.
 
