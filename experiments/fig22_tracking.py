@@ -284,8 +284,11 @@ def _plot(result: dict, path: str) -> None:
     rows = result["rows"]
     w = result["welds"]
     fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
-    xs = [r["x_mm"] for r in rows] + [r["crossing_x"] for r in rows]
-    ys = [r["y_mm"] for r in rows] + [r["crossing_y"] for r in rows]
+    # the look-ahead point is drawn where it is on the followed weld (during the turn and
+    # past the stem's end the stripe line meets the weld's extension far away)
+    on = [r for r in rows if r["counted"]]
+    xs = [r["x_mm"] for r in rows] + [r["crossing_x"] for r in on]
+    ys = [r["y_mm"] for r in rows] + [r["crossing_y"] for r in on]
     lo_x, hi_x = min(xs) - 40, max(max(xs) + 40, w["bar_width_mm"])
     lo_y, hi_y = min(ys) - 40, max(ys) + 40
     a.fill_between([lo_x, 0], -w["stem_width_mm"] / 2, w["stem_width_mm"] / 2, color="0.85")
@@ -296,8 +299,8 @@ def _plot(result: dict, path: str) -> None:
         [r["x_mm"] for r in rows], [r["y_mm"] for r in rows], "b-", label="robot reference point"
     )
     a.plot(
-        [r["crossing_x"] for r in rows],
-        [r["crossing_y"] for r in rows],
+        [r["crossing_x"] for r in on],
+        [r["crossing_y"] for r in on],
         "r.",
         ms=2,
         label="stripe crossing (look-ahead)",
