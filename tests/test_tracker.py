@@ -2,7 +2,6 @@
 
 import math
 import pathlib
-import sys
 
 import numpy as np
 import pytest
@@ -108,8 +107,7 @@ def test_kalman_recovers_heading_from_odometry():
 
 
 def test_closed_loop_short(tracker):
-    sys.path.insert(0, str(ROOT / "experiments"))
-    from fig22_tracking import run_closed_loop
+    from cslx.closed_loop import run_closed_loop
 
     res = run_closed_loop(
         n_frames=30, seed=3, tracker=tracker, start_offset_mm=3.0, start_heading_deg=0.0

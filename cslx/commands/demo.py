@@ -240,13 +240,23 @@ def _report(out: str, cal: dict, seg: list[dict], loop: dict | None, elapsed: fl
 
 
 def _closed_loop(out: str, seed: int, n: int, log) -> dict | None:
-    try:
-        from ..closed_loop import run_closed_loop
-    except ImportError:
-        log("closed loop: cslx.closed_loop is not available in this version; skipped")
-        return None
-    log(f"closed loop: {n} frames along a weld with a T-intersection ...")
-    return run_closed_loop(n_frames=n, seed=seed, out_dir=out, progress=True)
+    from ..closed_loop import plot_closed_loop, run_closed_loop
+
+    log(f"closed loop: {n} frames along a weld towards a T-intersection ...")
+    res = run_closed_loop(n_frames=n, seed=seed, progress=True)
+    plot_closed_loop(res, os.path.join(out, "closed_loop.png"))
+    keys = (
+        "n_frames n_counted mean_error_mm max_error_mm steady_mean_error_mm steady_max_error_mm "
+        "mean_abs_estimation_error_mm turns_completed junction_frames compile_s step_median_ms "
+        "loop_fps loop_fps_with_render"
+    ).split()
+    summary = {k: res[k] for k in keys}
+    log(
+        f"closed loop: tracking error mean {res['mean_error_mm']:.2f} mm, max "
+        f"{res['max_error_mm']:.2f} mm over {res['n_counted']} frames; tracker step "
+        f"{res['step_median_ms']:.1f} ms median"
+    )
+    return summary
 
 
 def run(args: argparse.Namespace) -> int:
