@@ -11,8 +11,11 @@ planes, robot frame), `weld` (bead and junction features), `pipeline` (the jitte
 function), `tracker` (the runtime object), `robot` (serial protocol, link, controller,
 simulator), `synth` (the renderer with exact ground truth), `shard` (multi-device batches).
 Heavy modules (`synth`, `calibration`, `tracker`, `robot`) are imported on demand.
+
+Importing cslx limits OpenBLAS to one thread (see `cslx._threads`; CSLX_BLAS_THREADS).
 """
 
+from ._threads import limit_blas_threads as _limit_blas_threads
 from .camera import Camera as Camera
 from .camera import distort as distort
 from .camera import pixel_to_ray as pixel_to_ray
@@ -49,3 +52,5 @@ from .weld import stripe_feature as stripe_feature
 from .weld import weld_features as weld_features
 
 __version__ = "0.1.0"
+
+_limit_blas_threads()
