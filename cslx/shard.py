@@ -1,9 +1,10 @@
 """Process recorded inspections (thousands of frames) over every available device.
 
 The frame batch is split along its leading axis over a one-axis device mesh with JAX's own
-sharding (`jax.sharding.Mesh`, `NamedSharding`, `PartitionSpec("frames")`); the per-frame
-function is vmapped and jit-compiled once, XLA runs each device's share of the frames where
-the data lies, and the results are gathered back to the host. Nothing here distributes work
+sharding (`jax.sharding.Mesh`, `NamedSharding`, `PartitionSpec("frames")`); one jit-compiled
+`jax.shard_map` runs the per-frame function on each device's share of the frames where the
+data lies (vmapped on accelerators, mapped frame by frame on the CPU where vmap was slower,
+`default_vmap_size`), and the results are gathered back to the host. Nothing here distributes work
 by hand: the same code runs on one CPU, on several devices of one host (GPUs, or CPU devices
 forced with ``XLA_FLAGS=--xla_force_host_platform_device_count=N``) and on several hosts
 after `initialize_distributed` (`jax.distributed.initialize`), where every process passes the
@@ -32,6 +33,7 @@ from jaxtyping import Array, ArrayLike
 
 __all__ = [
     "AXIS",
+    "default_vmap_size",
     "device_summary",
     "JAX_METHODS",
     "extract_batch",
@@ -93,10 +95,35 @@ def place_frames(batch: ArrayLike, mesh: Mesh) -> jax.Array:
     return jax.make_array_from_callback(batch.shape, sharding, lambda index: batch[index])
 
 
+def default_vmap_size(mesh: Mesh) -> int | None:
+    """Frames vmapped together per device: all of them on accelerators, one on the CPU.
+
+    On this 2-core CPU, `vmap` over frames made the per-frame cost of MED + Steger grow
+    with the batch (52 → 121 ms/frame from 1 to 8 frames, `results/bench_scaling.csv`;
+    `lax.map` over the same 8 frames was 2.2× faster than `vmap` in one run): the working
+    set of a batch leaves the cache. GPUs want the whole batch vectorised.
+    """
+    platforms = {d.platform for d in mesh.devices.flat}
+    return 1 if platforms == {"cpu"} else None
+
+
 @functools.lru_cache(maxsize=32)
-def _compiled(fn: Callable, mesh: Mesh) -> Callable:
-    out = NamedSharding(mesh, P(AXIS))
-    return jax.jit(jax.vmap(fn), out_shardings=out)
+def _compiled(fn: Callable, mesh: Mesh, vmap_size: int | None) -> Callable:
+    """jit of a `shard_map` over the frame axis: each device maps ``fn`` over its frames.
+
+    ``vmap_size`` frames are vectorised together (`lax.map` with ``batch_size``); None
+    vectorises all of a device's frames (plain `vmap`).
+    """
+
+    def local(frames):
+        if vmap_size is None or vmap_size >= frames.shape[0]:
+            return jax.vmap(fn)(frames)
+        return jax.lax.map(fn, frames, batch_size=vmap_size)
+
+    # check_vma=False: optimistix's fixed point builds its initial carry from constants,
+    # which shard_map's varying-axis check would reject; every frame is independent here.
+    spec = P(AXIS)
+    return jax.jit(jax.shard_map(local, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False))
 
 
 def _gather(tree: Any) -> Any:
@@ -113,6 +140,7 @@ def process_archive(
     *,
     batch_size: int | None = None,
     devices: Sequence[jax.Device] | None = None,
+    vmap_size: int | None | str = "auto",
     progress: Callable[[int, int], None] | None = None,
 ) -> Any:
     """Apply a per-frame function to every frame, sharded over the devices; results on host.
@@ -120,8 +148,9 @@ def process_archive(
     The F frames go through in batches of ``batch_size`` (rounded up to a multiple of the
     device count; the last batch is padded with copies of its last frame so that one
     compiled program serves every batch, and the padding is dropped from the results).
-    Each batch is placed with `place_frames` (split along the frame axis), run through
-    ``jit(vmap(fn))`` with the outputs sharded the same way, and gathered.
+    Each batch is placed with `place_frames` (split along the frame axis) and run by one
+    jit-compiled `jax.shard_map`: every device maps ``fn`` over its own frames, ``vmap_size``
+    at a time (vectorised with vmap), with the outputs sharded the same way; then gathered.
 
     Args:
         frames: (F, ...) frames, e.g. (F, H, W, 3) uint8 RGB; NumPy or JAX.
@@ -129,6 +158,8 @@ def process_archive(
             Pass the same function object each time to reuse the compiled program.
         batch_size: frames per device step (default: 8 per device, at most F rounded up).
         devices: devices to use (default `jax.devices()`: all of them, on every host).
+        vmap_size: frames vectorised together on a device; None = all of its frames (plain
+            vmap); "auto" = `default_vmap_size` (1 on the CPU, all on accelerators).
         progress: optional callback ``progress(done, total)`` after each batch.
 
     Returns:
@@ -145,7 +176,9 @@ def process_archive(
     if batch_size < 1:
         raise ValueError(f"batch_size must be positive, got {batch_size}")
     batch_size = -(-batch_size // n_dev) * n_dev
-    run = _compiled(fn, mesh)
+    if vmap_size == "auto":
+        vmap_size = default_vmap_size(mesh)
+    run = _compiled(fn, mesh, vmap_size)
     parts = []
     for start in range(0, total, batch_size):
         chunk = frames[start : start + batch_size]
@@ -180,6 +213,7 @@ def extract_batch(
     sigma: float = 2.0,
     batch_size: int | None = None,
     devices: Sequence[jax.Device] | None = None,
+    vmap_size: int | None | str = "auto",
     progress: Callable[[int, int], None] | None = None,
 ):
     """`cslx.segment.extract` on a batch of frames, sharded over the devices.
@@ -191,7 +225,7 @@ def extract_batch(
             frame and not supported here).
         stripe: "h" (one centre per column) or "v" (one per row).
         sigma: Steger's scale, px.
-        batch_size, devices, progress: as `process_archive`.
+        batch_size, devices, vmap_size, progress: as `process_archive`.
 
     Returns:
         `cslx.steger.Centres` with NumPy fields of shape (F, N): the same values as calling
@@ -216,7 +250,7 @@ def extract_batch(
         raise ValueError(f"expected RGB frames of shape (F, H, W, 3), got shape {frames.shape}")
     fn = _extract_fn(method, weights, stripe, float(sigma))
     pos, valid, strength = process_archive(
-        frames, fn, batch_size=batch_size, devices=devices, progress=progress
+        frames, fn, batch_size=batch_size, devices=devices, vmap_size=vmap_size, progress=progress
     )
     return Centres(pos, valid, strength)
 

@@ -52,7 +52,9 @@ _WORKER = textwrap.dedent(
     mesh = shard.frame_mesh()
     placed = shard.place_frames(F[:4], mesh)
     fn = lambda f: extract(f, "steger", stripe="h").pos
-    y = shard._compiled(fn, mesh)(placed)
+    y = shard._compiled(fn, mesh, 1)(placed)
+    yv = shard._compiled(fn, mesh, None)(placed)  # plain vmap per device
+    assert np.allclose(np.asarray(y), np.asarray(yv), atol=1e-4, equal_nan=True)
     info = dict(
         n_devices=jax.device_count(),
         input_devices=len(placed.sharding.device_set),
