@@ -12,7 +12,8 @@
 - Filter length: cold MED of the horizontal stripe on 640×480 for L from 16 to 480; time,
   fixed-point steps and time per step.
 - Batch size: the archive path (`cslx.shard.process_archive` of `cslx.segment.extract`
-  "med", horizontal stripe: jit(vmap) over the batch) for 1…32 frames per call; frames/s.
+  "med", horizontal stripe) for 1, 4, 16 frames per call, vectorised with vmap or mapped
+  frame by frame (`lax.map`, the CPU default of `cslx.shard`); frames/s.
 
 Writes `results/bench_scaling.csv` and `results/bench_scaling.png`.
 
@@ -35,7 +36,7 @@ from bench_speed import RESULTS, load_average, ping_pong, sensor32, timeit, vide
 
 SIZES = ((320, 240), (640, 480), (1280, 720), (1920, 1080))
 LENGTHS = (16, 32, 64, 120, 240, 360, 480)
-BATCHES = (1, 2, 4, 8, 16, 32)
+BATCHES = (1, 4, 16)
 FULL = dict(video_frames=24, calls=60, slow_calls=10, budget_s=30.0)
 QUICK = dict(video_frames=10, calls=20, slow_calls=3, budget_s=8.0)
 
@@ -156,24 +157,25 @@ def main(quick: bool = False, seed: int = 0, out=RESULTS, **overrides) -> list[d
         c = extract(rgb, "med", stripe="h")
         return c.pos, c.valid
 
-    for B in BATCHES:
-        batch = base[np.arange(B) % len(base)]
-        shard.process_archive(batch, one, batch_size=B)  # compile
-        res = timeit(
-            lambda _, batch=batch, B=B: shard.process_archive(batch, one, batch_size=B),
-            [0],
-            max(3, slow),
-            budget,
-            warmup=1,
-        )
-        add(
-            "batch",
-            B,
-            "archive: vmap extract med h",
-            res,
-            frames_per_s=B / (res["time_ms"] / 1e3),
-            ms_per_frame=res["time_ms"] / B,
-        )
+    for vmap_size, name in ((None, "archive: vmap"), (1, "archive: lax.map (CPU default)")):
+        for B in BATCHES:
+            if vmap_size == 1 and B == 1:
+                continue  # the same program as vmap of one frame
+            batch = base[np.arange(B) % len(base)]
+
+            def run(_, batch=batch, B=B, vmap_size=vmap_size):
+                return shard.process_archive(batch, one, batch_size=B, vmap_size=vmap_size)
+
+            run(0)  # compile
+            res = timeit(run, [0], max(3, slow), budget, warmup=1)
+            add(
+                "batch",
+                B,
+                name,
+                res,
+                frames_per_s=B / (res["time_ms"] / 1e3),
+                ms_per_frame=res["time_ms"] / B,
+            )
 
     load_end = load_average()
     prov = provenance(dict(cfg, quick=quick, seed=seed, load_start=load_start, load_end=load_end))
@@ -220,16 +222,21 @@ def _plot(rows, path, prov, load_start, load_end):
     b = a.twinx()
     b.plot(L, [r["med_steps"] for r in rs], "^:", color="tab:green", label="steps")
     b.set_ylabel("fixed-point steps", color="tab:green")
+    b.set_ylim(0, 1.3 * max(r["med_steps"] for r in rs))
+    a.set_ylim(0, None)
     a.legend(fontsize=8, loc="upper left")
     a.grid(True, alpha=0.3)
 
     a = ax[2]
-    rs = [r for r in rows if r["sweep"] == "batch"]
-    B = np.array([r["x"] for r in rs])
-    a.semilogx(B, [r["frames_per_s"] for r in rs], "o-", base=2)
-    a.set_xlabel("frames per call (vmap)")
+    single = [r for r in rows if r["sweep"] == "batch" and r["x"] == 1]
+    for name, marker in (("archive: vmap", "o-"), ("archive: lax.map (CPU default)", "s--")):
+        rs = single + [r for r in rows if r["name"] == name and r["x"] > 1]
+        B = np.array([r["x"] for r in rs])
+        a.semilogx(B, [r["frames_per_s"] for r in rs], marker, base=2, label=name[9:])
+    a.set_xlabel("frames per call (one device)")
     a.set_ylabel("frames / s")
     a.set_title("archive throughput (MED + Steger, h stripe)")
+    a.legend(fontsize=8)
     a.grid(True, alpha=0.3)
     load = (
         " / ".join(f"{x:.1f}" for x in load_start)
