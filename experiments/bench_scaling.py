@@ -23,6 +23,7 @@ Writes `results/bench_scaling.csv` and `results/bench_scaling.png`.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 import time
@@ -62,10 +63,12 @@ def main(quick: bool = False, seed: int = 0, out=RESULTS, **overrides) -> list[d
     import cv2
     import jax
 
-    from cslx import med, pipeline, shard
+    from cslx import pipeline, shard
     from cslx._provenance import provenance, write_csv
     from cslx.colour import monochrome
     from cslx.segment import extract
+
+    med = importlib.import_module("cslx.med")  # the module (cslx.med is also a function)
 
     base = video_frames(cfg["video_frames"], seed)
     sensor0 = sensor32()
