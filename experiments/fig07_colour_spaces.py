@@ -76,7 +76,9 @@ def main(seed: int = 7, nuisance: str = "sunny", kind: str = "cross", out: str =
         a.set_xlabel("row v (px)", fontsize=7)
     fig.tight_layout()
     fig.suptitle(
-        "Figure 7: one frame in three colour spaces (+ the kurtosis search's pick)", fontsize=10
+        "Figure 7: one frame in three colour spaces (+ the kurtosis search's pick)",
+        fontsize=10,
+        y=1.04,
     )
     path = C.save_figure(fig, out, "fig07_colour_spaces.png")
     print(f"wrote {path}")
