@@ -169,8 +169,6 @@ def stripe_errors(
         truth), gross_outliers (count of matched errors > gross_mm), false_positives (count),
         n_gt, n_matched.
     """
-    from .camera import project
-    from .sensor import triangulate
 
     uv_est = np.asarray(uv_est, float)
     gt_xyz = np.asarray(gt_xyz, float)
@@ -180,10 +178,8 @@ def stripe_errors(
         raise ValueError(
             f"gt_xyz must have shape ({uv_est.shape[0]}, 3) to match uv_est, got {gt_xyz.shape}"
         )
-    est_ok = np.all(np.isfinite(uv_est), axis=1)
-    gt_ok = np.all(np.isfinite(gt_xyz), axis=1)
-    matched = est_ok & gt_ok
-    n_gt, n_matched = int(gt_ok.sum()), int(matched.sum())
+    err, err_px, n_gt, n_fp = stripe_point_errors(uv_est, gt_xyz, sensor, plane)
+    n_matched = len(err)
     nan = math.nan
     out = dict(
         mean_mm=nan,
@@ -193,23 +189,51 @@ def stripe_errors(
         mean_px=nan,
         detection_rate=(n_matched / n_gt) if n_gt else nan,
         gross_outliers=0,
-        false_positives=int((est_ok & ~gt_ok).sum()),
+        false_positives=n_fp,
         n_gt=n_gt,
         n_matched=n_matched,
     )
     if n_matched == 0:
         return out
-    dtype = sensor.planes.dtype
-    xyz = np.asarray(triangulate(sensor, jnp.asarray(uv_est[matched], dtype), plane))
-    err = np.linalg.norm(xyz - gt_xyz[matched], axis=1)
-    err = np.where(np.isfinite(err), err, np.inf)  # a ray parallel to the plane is a miss
-    gt_uv = np.asarray(project(jnp.asarray(gt_xyz[matched], dtype), sensor.camera))
     out.update(
         mean_mm=float(np.mean(err)),
         median_mm=float(np.median(err)),
         p95_mm=float(np.percentile(err, 95)),
         max_mm=float(np.max(err)),
-        mean_px=float(np.mean(np.linalg.norm(uv_est[matched] - gt_uv, axis=1))),
+        mean_px=float(np.mean(err_px)),
         gross_outliers=int(np.sum(err > gross_mm)),
     )
     return out
+
+
+def stripe_point_errors(
+    uv_est: ArrayLike, gt_xyz: ArrayLike, sensor, plane: int
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Per-centre errors behind `stripe_errors`: (err_mm, err_px, n_gt, false_positives).
+
+    `err_mm` and `err_px` hold one entry per matched column (row): the 3-D distance of the
+    triangulated estimate (true calibration) to the ground-truth point, and the image distance
+    to the projected ground truth. Triangulation and projection run on full-length arrays
+    (placeholders where unmatched), so their compiled programs have one shape per stripe and
+    are not recompiled for every match count.
+    """
+    from .camera import project
+    from .sensor import triangulate
+
+    uv_est = np.asarray(uv_est, float)
+    gt_xyz = np.asarray(gt_xyz, float)
+    est_ok = np.all(np.isfinite(uv_est), axis=1)
+    gt_ok = np.all(np.isfinite(gt_xyz), axis=1)
+    m = est_ok & gt_ok
+    n_gt, n_fp = int(gt_ok.sum()), int((est_ok & ~gt_ok).sum())
+    if not m.any():
+        return np.zeros(0), np.zeros(0), n_gt, n_fp
+    dtype = sensor.planes.dtype
+    centre = np.array([sensor.camera.u0, sensor.camera.v0], float)
+    uv_full = np.where(m[:, None], uv_est, centre)
+    gt_full = np.where(m[:, None], gt_xyz, np.array([0.0, 0.0, 1.0]))
+    xyz = np.asarray(triangulate(sensor, jnp.asarray(uv_full, dtype), plane))[m]
+    err = np.linalg.norm(xyz - gt_xyz[m], axis=1)
+    err = np.where(np.isfinite(err), err, np.inf)  # a ray parallel to the plane is a miss
+    gt_uv = np.asarray(project(jnp.asarray(gt_full, dtype), sensor.camera))[m]
+    return err, np.linalg.norm(uv_est[m] - gt_uv, axis=1), n_gt, n_fp

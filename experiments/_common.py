@@ -91,31 +91,10 @@ def round_robin(n_frames: int, seed: int, sensor=None) -> Iterator[tuple[str, st
 
 
 def point_errors(uv: np.ndarray, gt_xyz: np.ndarray, sensor, plane: int):
-    """Per-point 3-D errors (mm) and pixel errors of matched centres, as `stripe_errors`.
+    """Per-point 3-D and pixel errors of matched centres: `cslx.segment.stripe_point_errors`."""
+    from cslx.segment import stripe_point_errors
 
-    Returns (err_mm (n_matched,), err_px (n_matched,), n_gt, n_false_positive).
-    """
-    import jax.numpy as jnp
-
-    from cslx.camera import project
-    from cslx.sensor import triangulate
-
-    est_ok = np.all(np.isfinite(uv), axis=1)
-    gt_ok = np.all(np.isfinite(gt_xyz), axis=1)
-    m = est_ok & gt_ok
-    n_gt, n_fp = int(gt_ok.sum()), int((est_ok & ~gt_ok).sum())
-    if not m.any():
-        return np.zeros(0), np.zeros(0), n_gt, n_fp
-    # Full-length arrays with placeholders where unmatched: one shape per stripe, so the
-    # jit-compiled triangulation and projection compile once, not once per match count.
-    dtype = sensor.planes.dtype
-    uv_full = np.where(m[:, None], uv, 320.0)
-    gt_full = np.where(m[:, None], gt_xyz, np.array([0.0, 0.0, 230.0]))
-    xyz = np.asarray(triangulate(sensor, jnp.asarray(uv_full, dtype), plane))[m]
-    err = np.linalg.norm(xyz - gt_xyz[m], axis=1)
-    err = np.where(np.isfinite(err), err, np.inf)
-    gt_uv = np.asarray(project(jnp.asarray(gt_full, dtype), sensor.camera))[m]
-    return err, np.linalg.norm(uv[m] - gt_uv, axis=1), n_gt, n_fp
+    return stripe_point_errors(uv, gt_xyz, sensor, plane)
 
 
 class Pool:

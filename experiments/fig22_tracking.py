@@ -1,30 +1,9 @@
 """Figure 22: closed-loop weld tracking through a T-intersection by the simulated robot.
 
-A differential-drive robot (`cslx.robot.RobotSimulator`, on the far end of a real
-pseudo-terminal, lock-step mode) starts beside a weld (the stem) that ends at a
-T-intersection with a crossing weld (the bar). Every step:
-
-1. the frame its camera sees from the simulator's true pose is rendered with the nuisances
-   (`cslx.synth.render_image`, default rig);
-2. the compiled tracker (`cslx.tracker.Tracker`) estimates the weld line, with the
-   odometry from the robot's telemetry received over the link;
-3. the path controller (`cslx.robot.PathController`: follow, approach the junction, turn
-   90° left in place, follow the bar) computes (v, ω), sent over the link as a
-   VELOCITY_COMMAND (the observation goes too) and acknowledged by the robot;
-4. the simulator integrates 1/fps s of motion.
-
-Lock-step: rendering a frame takes about a second on the CPU, so simulated time advances only
-when the loop says so, and the link's watchdog timeouts are raised accordingly.
-
-Tracking error (the paper: < 2 mm on average): the distance from the point where the
-horizontal stripe crosses the robot's x_r axis (the controlled look-ahead point) to the true
-centre line of the weld being followed, |offset|·cos(heading), in frames where that point is
-on the followed weld (not while the stripe is past the end of the stem, and not during the
-turn). The tracker's estimation error (estimated − true offset) is reported beside it.
-
-Writes results/fig22_tracking.csv (one row per frame), .md (headline numbers, provenance)
-and .png (welds and robot trail, error over time). The loop itself is
-`cslx.closed_loop.run_closed_loop` (`cslx demo` runs a short version).
+Runs `cslx.closed_loop.run_closed_loop` (tracker, path controller and the pty robot
+simulator; its docstring describes the loop and the error measure) over a 440-frame path and
+writes results/fig22_tracking.csv (one row per frame), .md (headline numbers, provenance)
+and .png (welds and robot trail, error over time).
 """
 
 from __future__ import annotations
