@@ -11,29 +11,26 @@
   of the segment, to convergence).
 - Filter length: cold MED of the horizontal stripe on 640×480 for L from 16 to 480; time,
   fixed-point steps and time per step.
-- Batch size: the archive path (`cslx.shard.process_archive` of `cslx.segment.extract`
+- Batch size: the archive path (`cslx.segmentation.shard.process_archive` of `cslx.segmentation.interface`
   "med", horizontal stripe) for 1, 4, 16 frames per call, vectorised with vmap or mapped
-  frame by frame (`lax.map`, the CPU default of `cslx.shard`); frames/s.
+  frame by frame (`lax.map`, the CPU default of `cslx.segmentation.shard`); frames/s.
 
 Writes `results/bench_scaling.csv` and `results/bench_scaling.png`.
 
-    OPENBLAS_NUM_THREADS=1 python experiments/bench_scaling.py [--quick]
+    OPENBLAS_NUM_THREADS=1 python -m experiments.bench_scaling [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
-import sys
 import time
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_speed import RESULTS, load_average, ping_pong, sensor32, timeit, video_frames  # noqa: E402
+from experiments.bench_speed import RESULTS, load_average, ping_pong, sensor32, timeit, video_frames  # noqa: E402
 
 SIZES = ((320, 240), (640, 480), (1280, 720), (1920, 1080))
 LENGTHS = (16, 32, 64, 120, 240, 360, 480)
@@ -46,7 +43,7 @@ def scaled_sensor(sensor, size):
     """The sensor with its camera intrinsics scaled to an image of `size` (w, h)."""
     import equinox as eqx
 
-    from cslx.camera import Camera
+    from cslx.sensor.camera import Camera
 
     cam = sensor.camera
     w0, h0 = cam.image_size
@@ -63,12 +60,10 @@ def main(quick: bool = False, seed: int = 0, out=RESULTS, **overrides) -> list[d
     import cv2
     import jax
 
-    from cslx import pipeline, shard
-    from cslx._provenance import provenance, write_csv
-    from cslx.colour import monochrome
-    from cslx.segment import extract
-
-    med = importlib.import_module("cslx.med")  # the module (cslx.med is also a function)
+    from cslx.provenance import provenance, write_csv
+    from cslx.runtime import pipeline
+    from cslx.segmentation import extract, med, shard
+    from cslx.segmentation.colour import monochrome
 
     base = video_frames(cfg["video_frames"], seed)
     sensor0 = sensor32()

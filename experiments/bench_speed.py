@@ -3,14 +3,14 @@
 Timed (median wall time after warm-up, every result blocked with `jax.block_until_ready` or
 converted to NumPy):
 
-- the whole per-frame pipeline (`cslx.pipeline.process_frame`: colour → MED on both stripes
+- the whole per-frame pipeline (`cslx.runtime.pipeline.process_frame`: colour → MED on both stripes
   → Steger → triangulation → weld features) in tracking mode (consecutive video frames,
   state carried: warm-started MED, region of interest) and cold on the full frame (flat
   MED start, L = 240 / 320, run to convergence; fixed-point steps reported); the tracker's
   `step` (pipeline + host transfer + Kalman filter);
 - each stage on its own (colour, MED per stripe cold and warm, Steger per stripe,
   triangulation, weld features);
-- our baselines CM / LA / QA / AA (`cslx.baselines`);
+- our baselines CM / LA / QA / AA (`cslx.segmentation.baselines`);
 - peers: a plain NumPy/SciPy MED update (eqs. (22)–(24), written here with NumPy FFTs and
   `scipy.linalg.solve_toeplitz`), scikit-image's Hessian ridge measures
   (`hessian_matrix` + `hessian_matrix_eigvals`), OpenCV Gaussian-derivative filters
@@ -26,14 +26,13 @@ load average at the start and end is recorded.
 
 Writes `results/bench_speed.csv` and `results/bench_speed.md`.
 
-    OPENBLAS_NUM_THREADS=1 python experiments/bench_speed.py           # full run
-    OPENBLAS_NUM_THREADS=1 python experiments/bench_speed.py --quick   # smoke run
+    OPENBLAS_NUM_THREADS=1 python -m experiments.bench_speed           # full run
+    OPENBLAS_NUM_THREADS=1 python -m experiments.bench_speed --quick   # smoke run
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import math
 import os
@@ -44,7 +43,7 @@ import sys
 import tempfile
 import time
 
-# OpenBLAS's threaded Cholesky stalls MED on this machine (cslx.med docstring).
+# OpenBLAS's threaded Cholesky stalls MED on this machine (cslx.segmentation.med docstring).
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
@@ -93,7 +92,7 @@ def video_frames(n: int, seed: int):
     if path.exists():
         with np.load(path) as z:
             return z["frames"]
-    from cslx import synth
+    from cslx import sim as synth
 
     frames, _, _, _ = synth.render_video(n_frames=n, seed=seed, nuisance="sunny")
     np.savez(path, frames=frames)
@@ -169,7 +168,7 @@ def gaussian_kernels(sigma: float):
 def opencv_steger(img: np.ndarray, kernels, *, threshold=0.1, snr=5.0, max_offset=0.6):
     """Steger per column with cv2.sepFilter2D derivatives and a NumPy selection (a peer).
 
-    Same closed-form Hessian eigen-decomposition, offset and acceptance as `cslx.steger`;
+    Same closed-form Hessian eigen-decomposition, offset and acceptance as `cslx.segmentation.steger`;
     per column the strongest accepted point (argmax), moved to the column along the line.
     """
     import cv2
@@ -261,7 +260,7 @@ def _worker_compile(cache_dir: str) -> dict:
 
     jax.config.update("jax_compilation_cache_dir", cache_dir)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    from cslx.tracker import Tracker
+    from cslx.runtime.tracker import Tracker
 
     tracker = Tracker.from_calibration(sensor32(), log=lambda s: None)
     frame = np.zeros(tracker.image_shape, np.uint8)
@@ -273,7 +272,7 @@ def _worker_memory(n_frames: int, seed: int, n_video: int) -> dict:
     """A tracker process stepping n_frames: RSS samples, tracemalloc, peak RSS."""
     import tracemalloc
 
-    from cslx.tracker import Tracker
+    from cslx.runtime.tracker import Tracker
 
     def rss_mb():
         with open("/proc/self/statm") as f:
@@ -348,11 +347,11 @@ def main(
     import jax
     import jax.numpy as jnp
 
-    from cslx import _med_fft, baselines, pipeline, steger, weld
-    from cslx._provenance import provenance, write_csv
-    from cslx.tracker import Tracker
+    from cslx.provenance import provenance, write_csv
+    from cslx.runtime import pipeline, weld
+    from cslx.runtime.tracker import Tracker
+    from cslx.segmentation import baselines, med, med_fft, steger
 
-    med = importlib.import_module("cslx.med")  # the module (cslx.med is also a function)
     sensor = sensor32()
     frames = video_frames(cfg["video_frames"], seed)
     F = len(frames)
@@ -514,7 +513,8 @@ def main(
         stage[f"cold_steps_{stripe}"] = float(np.median(steps))
         # The NumPy/SciPy peer on exactly the same input and filter.
         X = np.asarray(
-            _med_fft.centre_and_taper(med._segments(monos[0], axis), med.DEFAULT_TAPER), np.float64
+            med_fft.centre_and_taper(med.stripe_segments(monos[0], axis), med.DEFAULT_TAPER),
+            np.float64,
         )
         Wflat = np.full(L, 1 / math.sqrt(L))
         npb = numpy_med_prepare(X, L)
@@ -522,7 +522,9 @@ def main(
         theirs_once = numpy_med_update(Wflat, npb, 1e-5)
         extra[f"numpy_med_agreement_{stripe}"] = float(np.max(np.abs(ours_once - theirs_once)))
         Xs = [
-            np.asarray(_med_fft.centre_and_taper(med._segments(monos[i], axis), med.DEFAULT_TAPER))
+            np.asarray(
+                med_fft.centre_and_taper(med.stripe_segments(monos[i], axis), med.DEFAULT_TAPER)
+            )
             for i in range(min(F, 4))
         ]
         t_prep = timeit(
@@ -608,8 +610,8 @@ def main(
     # Triangulation and weld features on the pipeline's own outputs.
     tri = jax.jit(
         lambda ch, cv: (
-            pipeline._points(sensor, ch, 0, 0, jnp.float32),
-            pipeline._points(sensor, cv, 1, 1, jnp.float32),
+            pipeline.stripe_points(sensor, ch, 0, 0, jnp.float32),
+            pipeline.stripe_points(sensor, cv, 1, 1, jnp.float32),
         )
     )
     results = [pipeline.process_frame(sensor, config, f, state0, roi=False)[0] for f in frames[:4]]
@@ -625,8 +627,8 @@ def main(
     )
 
     def features(r):
-        Ph, kh = pipeline._clean_profile(r.points_h, jnp.isfinite(r.points_h[:, 0]), config)
-        Pv, kv = pipeline._clean_profile(r.points_v, jnp.isfinite(r.points_v[:, 0]), config)
+        Ph, kh = pipeline.clean_profile(r.points_h, jnp.isfinite(r.points_h[:, 0]), config)
+        Pv, kv = pipeline.clean_profile(r.points_v, jnp.isfinite(r.points_v[:, 0]), config)
         return weld.weld_features(Ph, kh, Pv, kv, config.weld)
 
     feat = jax.jit(features)
@@ -642,7 +644,7 @@ def main(
         fn = getattr(baselines, name)
         add(
             "baseline",
-            f"{name.upper()} (cslx.baselines, h stripe)",
+            f"{name.upper()} (cslx.segmentation.baselines, h stripe)",
             timeit(
                 lambda i, fn=fn: fn(monos_np[i], 0),
                 list(range(F)),
@@ -777,7 +779,7 @@ def main(
 
 
 def _markdown(rows, extra, prov, tracking, cold_row, stage, quick) -> str:
-    from cslx._provenance import md_table, provenance_md
+    from cslx.provenance import md_table, provenance_md
 
     def find(prefix):
         return next((r for r in rows if r["name"].startswith(prefix)), None)
@@ -869,7 +871,7 @@ def _markdown(rows, extra, prov, tracking, cold_row, stage, quick) -> str:
         f"{fmt_load(ls)}, at the end {fmt_load(le)} on {os.cpu_count()} cores. Absolute "
         "times are inflated accordingly; the peer/cslx ratios were taken in the same run.\n\n",
         "**GPU**: no GPU was available in this session; the code is device-agnostic "
-        "(`cslx.shard` shards archives over whatever devices JAX sees).\n\n",
+        "(`cslx.segmentation.shard` shards archives over whatever devices JAX sees).\n\n",
         "## Targets (issue 7)\n\n",
         md_table(targets, ["target", "measured", "verdict"]),
         ("\nWhere the time goes (targets not met):\n\n" + "".join(gap)) if gap else "",

@@ -45,7 +45,7 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
 def main(seed: int = 3, scale: float = 0.5, out: str | None = None) -> str:
     import cv2
 
-    from cslx import synth
+    from cslx import sim as synth
     from cslx.sensor import default_sensor
 
     sensor = default_sensor()

@@ -10,13 +10,9 @@ Writes `results/fig07_colour_spaces.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 SPACES = {"R": (1.0, 0.0, 0.0), "gray": (0.299, 0.587, 0.114), "R−G": (1.0, -1.0, 0.0)}
 
@@ -25,7 +21,7 @@ def main(seed: int = 7, nuisance: str = "sunny", kind: str = "cross", out: str =
     """Draw Figure 7; return one row per space (weights, kurtosis score, stripe contrast)."""
     import matplotlib.pyplot as plt
 
-    from cslx.colour import kurtosis_objective, monochrome, search_space
+    from cslx.segmentation.colour import kurtosis_objective, monochrome, search_space
 
     image, gt = C.frame_at(kind, nuisance, seed, 0)
     best, _ = search_space(image)

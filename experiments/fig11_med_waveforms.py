@@ -1,7 +1,7 @@
 """Figure 11 of the paper: column waveforms before and after MED, all columns superposed.
 
 The monochrome (R−G) frame's columns are drawn on top of each other, before MED and after it
-(delay-compensated output of `cslx.med.med`, horizontal stripe, the paper's L = 50 %): MED
+(delay-compensated output of `cslx.segmentation.med.med`, horizontal stripe, the paper's L = 50 %): MED
 concentrates each column's energy at the stripe. The panels on the right show the
 normalised columns around the true stripe row, to compare widths. Kurtosis (mean sample
 excess kurtosis of the columns) is given before and after.
@@ -11,13 +11,9 @@ Writes `results/fig11_med_waveforms.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 
 def _excess_kurtosis(X: np.ndarray) -> float:
@@ -56,7 +52,7 @@ def main(
     """Draw Figure 11 for each (nuisance, seed); return kurtosis and width before/after MED."""
     import matplotlib.pyplot as plt
 
-    from cslx.med import med
+    from cslx.segmentation.med import med
 
     fig, axes = plt.subplots(
         len(nuisances),

@@ -9,23 +9,19 @@ Writes `results/fig12_centres.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 
 def main(seed: int = 7, nuisance: str = "sunny", kind: str = "cross", out: str = str(C.RESULTS)):
     """Draw Figure 12; return the error summary of each stripe."""
     import matplotlib.pyplot as plt
 
-    from cslx.med import med
-    from cslx.segment import centres_to_pixels, stripe_errors
+    from cslx.segmentation import centres_to_pixels, stripe_errors
+    from cslx.segmentation.med import med
+    from cslx.segmentation.steger import steger_centres
     from cslx.sensor import default_sensor
-    from cslx.steger import steger_centres
 
     sensor = default_sensor()
     image, gt = C.frame_at(kind, nuisance, seed, 0, sensor)

@@ -11,13 +11,9 @@ Writes `results/fig16_17_methods.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 
 def main(seed: int = 5, nuisance: str = "sunny", kind: str = "straight", out: str = str(C.RESULTS)):

@@ -10,11 +10,7 @@ Writes `results/fig18_conditions.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 PANELS = (
     ("cross", "sunny", "T-intersection in sunshine"),
@@ -28,7 +24,7 @@ def main(seed: int = 18, out: str = str(C.RESULTS)):
     """Draw Figure 18; return per panel and stripe the error summary."""
     import matplotlib.pyplot as plt
 
-    from cslx.segment import stripe_errors
+    from cslx.segmentation import stripe_errors
     from cslx.sensor import default_sensor
 
     sensor = default_sensor()

@@ -12,13 +12,9 @@ Writes `results/fig21_weld_profiles.png`.
 
 from __future__ import annotations
 
-import os
-import sys
-
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 
 def _limits(ax, x, z):

@@ -1,6 +1,6 @@
 """Figure 22: closed-loop weld tracking through a T-intersection by the simulated robot.
 
-Runs `cslx.closed_loop.run_closed_loop` (tracker, path controller and the pty robot
+Runs `cslx.sim.closed_loop.run_closed_loop` (tracker, path controller and the pty robot
 simulator; its docstring describes the loop and the error measure) over a 440-frame path and
 writes results/fig22_tracking.csv (one row per frame), .md (headline numbers, provenance)
 and .png (welds and robot trail, error over time).
@@ -11,11 +11,9 @@ from __future__ import annotations
 import argparse
 import os
 import pathlib
-import sys
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
-sys.path.insert(0, str(ROOT))
 
 DEFAULTS = dict(
     n_frames=440,
@@ -29,7 +27,7 @@ DEFAULTS = dict(
     settle_s=5.0,
 )
 
-from cslx.closed_loop import plot_closed_loop, run_closed_loop  # noqa: E402
+from cslx.sim.closed_loop import plot_closed_loop, run_closed_loop  # noqa: E402
 
 
 def main(out_dir: str | os.PathLike | None = None, progress: bool = True, **config) -> dict:
@@ -44,7 +42,7 @@ def main(out_dir: str | os.PathLike | None = None, progress: bool = True, **conf
 
 
 def _write(result: dict, config: dict, out_dir: pathlib.Path) -> None:
-    from cslx._provenance import md_table, provenance, provenance_md, write_csv
+    from cslx.provenance import md_table, provenance, provenance_md, write_csv
 
     out_dir.mkdir(parents=True, exist_ok=True)
     rows = result["rows"]

@@ -1,6 +1,6 @@
 """Error vs nuisance strength per method: where does each segmentation method break?
 
-Starting from the "sunny" preset of `cslx.synth.NUISANCES`, one knob is varied at a time:
+Starting from the "sunny" preset of `cslx.sim.NUISANCES`, one knob is varied at a time:
 sunlight (`sun`, with the steel's broad sheen scaled in proportion, as both come from the
 sun), specular glints on the bead (`glint`), and laser speckle contrast (`speckle`). Every
 level renders the same scenes (frame i: world, pose and noise from `default_rng([seed, i])`,
@@ -14,13 +14,11 @@ Writes `results/sweep_noise.csv` and `results/sweep_noise.png`.
 from __future__ import annotations
 
 import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 _BREAK_NOTE = (
     "First level at which the median error exceeds 0.5 mm, or the detection rate falls below "
@@ -36,7 +34,7 @@ LEVELS = {
 
 
 def _nuisance(knob: str, level: float):
-    from cslx import synth
+    from cslx import sim as synth
 
     base = synth.NUISANCES["sunny"]
     if knob == "sun":
@@ -45,7 +43,7 @@ def _nuisance(knob: str, level: float):
 
 
 def _frame(nz, seed: int, i: int, sensor):
-    from cslx import synth
+    from cslx import sim as synth
 
     kind = C.KINDS[i % 2]
     rng = np.random.default_rng([seed, i])
@@ -80,7 +78,7 @@ def _replot(out):
     import csv
     import re
 
-    from cslx._provenance import md_table
+    from cslx.provenance import md_table
 
     with open(os.path.join(out, "sweep_noise.csv"), encoding="utf-8") as f:
         rows = [
@@ -183,7 +181,7 @@ def main(
     """Run the sweep, write CSV + PNG + MD note, return the rows."""
     from tqdm import tqdm
 
-    from cslx._provenance import md_table, provenance, provenance_md, write_csv
+    from cslx.provenance import md_table, provenance, provenance_md, write_csv
     from cslx.sensor import default_sensor
 
     if replot:  # re-derive the plot and the break table from a finished run's CSV

@@ -6,7 +6,7 @@ value is the ray through the feature point cut with the board plane, the measure
 same ray cut with the calibrated laser plane; it reports RMS errors (0.094, 0.034, 0.120) mm
 in (x, y, z).
 
-Here the boards are rendered (`cslx.synth.render_calibration`) with the default sensor
+Here the boards are rendered (`cslx.sim.render_calibration`) with the default sensor
 (Table 4's intrinsics, an orthogonal cross projector), so the truth is known:
 
 - standard value (the paper's definition): the feature pixel's ray through the CALIBRATED
@@ -33,14 +33,11 @@ joint refinement with the orthogonality constraint ("joint+orth"). Writes
 from __future__ import annotations
 
 import os
-import sys
 import time
 
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 
 PAPER_RMS = (0.094, 0.034, 0.120)
 DEFAULT = dict(
@@ -69,9 +66,9 @@ def _feature_points(
 ):
     """The paper's feature points at the held-out pose: (K, 2) pixels and their plane ids."""
     from cslx.calibration import (
-        _extract,
         board_mask,
         edge_crossings,
+        laser_centres,
         lift_to_board,
         on_board,
         stripe_pixels,
@@ -81,7 +78,7 @@ def _feature_points(
     mask = board_mask(cam, R, t, pattern, square)
     uvs, ids, n_gross = [], [], [0]
     for k, stripe in enumerate("hv"):
-        pos, valid = _extract(laser, stripe, mask, method)
+        pos, valid = laser_centres(laser, stripe, mask, method)
         uv = stripe_pixels(pos, valid & np.isfinite(pos), stripe)
         _, Xt = lift_to_board(uv, cam, R, t)
         on = on_board(Xt, pattern, square, 1.0, 0.25)
@@ -277,9 +274,9 @@ def main(**config):
     import jax
 
     jax.config.update("jax_enable_x64", True)  # the experiment script, not the library
-    from cslx._provenance import md_table, provenance, provenance_md, write_csv
+    from cslx.provenance import md_table, provenance, provenance_md, write_csv
     from cslx.sensor import default_sensor
-    from cslx.synth import render_calibration
+    from cslx.sim import render_calibration
 
     cfg = {**DEFAULT, **config}
     sensor_true = default_sensor()

@@ -2,14 +2,14 @@
 
 CM, LA, QA, AA and MED (the paper's five) in the R and R−G spaces, on the horizontal and the
 vertical stripe of rendered frames of every scene kind (straight weld, T-intersection) and
-every nuisance preset of `cslx.synth.NUISANCES` (clean, sunny, glare, shadow). Our rows:
+every nuisance preset of `cslx.sim.NUISANCES` (clean, sunny, glare, shadow). Our rows:
 Steger without MED, and MED / Steger in the kurtosis-chosen integer space (`search_space`,
 chosen per frame and per stripe direction) and in the continuous-weight space
 (`optimise_weights`).
 
 Errors follow DESIGN.md (Metrics): each estimated centre is triangulated with the true
 calibration and compared with the ground-truth 3-D point of its column (row); the errors of
-all frames are pooled. Running time is the median wall time of one `cslx.segment.extract`
+all frames are pooled. Running time is the median wall time of one `cslx.segmentation.interface`
 call on a 640×480 RGB frame (colour conversion included), after warm-up, with the first
 call (jit compile) reported separately.
 
@@ -17,21 +17,19 @@ Writes `results/table6_segmentation.csv` (every stripe × space × method × con
 `results/table6_segmentation.md` (paper layout with the paper's values beside ours, the
 claims checked, provenance).
 
-    python experiments/table6_segmentation.py            # full run (504 frames, time budget)
-    python experiments/table6_segmentation.py --quick    # CI smoke run
+    python -m experiments.table6_segmentation            # full run (504 frames, time budget)
+    python -m experiments.table6_segmentation --quick    # CI smoke run
 """
 
 from __future__ import annotations
 
 import math
 import os
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import _common as C  # noqa: E402
+from experiments import common as C  # noqa: E402
 
 #: Table 6 of the paper: (stripe, space, method) -> (average error mm, running time ms).
 PAPER = {
@@ -87,7 +85,7 @@ FIELDS = [
 
 def _weights(image, space: str, stripe: str):
     """Eq. (8) weights of a space for this frame ("auto"/"cont" are chosen on the frame)."""
-    from cslx.colour import optimise_weights, search_space
+    from cslx.segmentation.colour import optimise_weights, search_space
 
     axis = C.STRIPE_PLANE[stripe]
     if space in C.SPACES:
@@ -161,7 +159,7 @@ def _timings(images, extras, n_calls, budget_s, paper_budget_s):
     """Time phase: median ms per frame per (stripe, space, method)."""
     from tqdm import tqdm
 
-    from cslx import segment
+    from cslx import segmentation as segment
 
     out = {}
     for stripe, space, method in tqdm(_configs(extras), desc="table6 timing"):
@@ -274,7 +272,7 @@ def _claims(table: dict) -> list[str]:
 
 
 def _markdown(rows, table, prov, chosen, info) -> str:
-    from cslx._provenance import md_table, provenance_md
+    from cslx.provenance import md_table, provenance_md
 
     methods = C.PAPER_METHODS + ("steger",)
     out = ["# Table 6: stripe segmentation accuracy and running time (rendered frames)", ""]
@@ -284,7 +282,7 @@ def _markdown(rows, table, prov, chosen, info) -> str:
         f"{', '.join(info['conditions'])} (frame f is condition f mod {len(info['conditions'])}); "
         f"the data set of condition c has seed 1000·{info['seed']} + c, frame i of it the "
         f"generator "
-        f"`default_rng([seed_c, i])` (`experiments/_common.frame_at`). Both stripes are scored on "
+        f"`default_rng([seed_c, i])` (`experiments/common.frame_at`). Both stripes are scored on "
         f"every frame (the cross projector draws both in straight and T scenes). Vertical MED "
         f"and the per-frame colour-space rows (kurtosis, continuous) cost seconds per frame on "
         f"a loaded CPU; with `--heavy-every k` > 1 they are scored on every k-th frame only "
@@ -295,7 +293,7 @@ def _markdown(rows, table, prov, chosen, info) -> str:
         "ground-truth point of the same column (horizontal) or row (vertical), pooled over all "
         'centres of all frames. *mean* is the paper\'s "average error". Detection = matched '
         "centres / ground-truth columns; gross = share of matched centres off by > 1 mm. "
-        f"Time = median ms of one `cslx.segment.extract` call on a 640×480 RGB frame "
+        f"Time = median ms of one `cslx.segmentation.interface` call on a 640×480 RGB frame "
         f"(colour conversion included), cycling over {info['time_frames']} frames after 3 warm-up "
         f"calls, up to {info['time_target']} calls or {info['paper_time_budget']:.0f} s per row in "
         f"R and R−G ({info['time_budget']:.0f} s for the per-frame spaces) (the "
@@ -385,7 +383,7 @@ def main(
     paper_time_budget_s: float = 90.0,
 ) -> list[dict]:
     """Run Table 6 and write `table6_segmentation.{csv,md}` into `out`; return the rows."""
-    from cslx._provenance import provenance, write_csv
+    from cslx.provenance import provenance, write_csv
 
     if quick:
         frames, time_calls, time_budget_s, time_frames = min(frames, 1), 1, 0.5, 1
@@ -403,7 +401,7 @@ def main(
         heavy_every=heavy_every,
         paper_time_budget_s=paper_time_budget_s,
         sigma_px=2.0,
-        med="cslx.med defaults (L = 50% of segment, flat start)",
+        med="cslx.segmentation.med defaults (L = 50% of segment, flat start)",
         kurtosis_form="normalized",
     )
     load_start = C.load_average()

@@ -5,12 +5,12 @@ function of the pipeline's settings. This script tunes
 
 - the colour weights w of eq. (8) (on the unit sphere: w / ‖w‖ is used),
 - Steger's scale σ (continuous here; the library's detector takes it as a static float),
-- MED's diagonal loading of R (eq. (22), `cslx.med.med`'s ``loading``, as log10),
+- MED's diagonal loading of R (eq. (22), `cslx.segmentation.med.med`'s ``loading``, as log10),
 
 by minimising a robust (Huber, δ = 1 mm) 3-D error against rendered ground truth on
 TRAINING scenes, with `jax.grad` driving optimistix's BFGS one step at a time (so that the
 loss curve can be recorded). It then evaluates the ordinary, hard pipeline
-(`cslx.segment.extract(..., "med")`: converged MED, Steger's thresholds, no softness) with
+(`cslx.segmentation.extract(..., "med")`: converged MED, Steger's thresholds, no softness) with
 the tuned settings on HELD-OUT seeds, including nuisance kinds and a scene kind never seen in
 training, against the paper's fixed settings (R−G, σ = 2 px, default MED).
 
@@ -18,7 +18,7 @@ The differentiable surrogate (`soft_centres`, `surrogate_loss`) differs from the
 pipeline in three ways, each needed for a useful gradient:
 
 1. MED is unrolled for a fixed number of fixed-point steps of eqs. (22)–(24)
-   (`cslx.med.med_update`) from Table 2's flat start instead of iterated to the tolerance;
+   (`cslx.segmentation.med.med_update`) from Table 2's flat start instead of iterated to the tolerance;
    the gradient flows through every Cholesky solve and the delay estimate.
 2. Steger's Gaussian derivatives use taps computed from a traced σ on a fixed support
    (4 σ_max), not the static scipy-exact kernel.
@@ -29,7 +29,7 @@ pipeline in three ways, each needed for a useful gradient:
 
 The MED filter length L is not differentiable; it is left at the paper's 50 %.
 
-Run: `python experiments/tune_differentiable.py` (≈ 10–15 min on 2 cores) or `--quick`.
+Run: `python -m experiments.tune_differentiable` (≈ 10–15 min on 2 cores) or `--quick`.
 Writes `results/tune_differentiable.{csv,md,png}` with the provenance of the run.
 """
 
@@ -46,7 +46,7 @@ import numpy as np
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
 
-#: The paper's fixed settings: R−G, Steger σ = 2 px (`cslx.segment.DEFAULT_SIGMA`), MED's
+#: The paper's fixed settings: R−G, Steger σ = 2 px (`cslx.segmentation.DEFAULT_SIGMA`), MED's
 #: default float32 loading 1e-5.
 PAPER = dict(weights=(1.0, -1.0, 0.0), sigma=2.0, loading=1e-5)
 SIGMA_RANGE = (0.7, 4.5)
@@ -88,7 +88,7 @@ QUICK = dict(
 def _gauss_taps(sigma, order: int, radius: int):
     """Gaussian (derivative) taps g(x), x = −radius..radius, differentiable in σ.
 
-    Same formula as `cslx.steger` (sampled, normalised Gaussian times the derivative
+    Same formula as `cslx.segmentation.steger` (sampled, normalised Gaussian times the derivative
     polynomial) on a fixed support, so that σ can be traced.
     """
     import jax.numpy as jnp
@@ -191,7 +191,7 @@ def _stripe_loss(I, gt_xyz, sensor, theta, axis: int, cfg):
     """Huber 3-D error (mm) of one stripe of one frame, mean over ground-truth columns/rows."""
     import jax.numpy as jnp
 
-    from cslx.med import initial_filter, med_apply, med_prepare, med_update
+    from cslx.segmentation.med import initial_filter, med_apply, med_prepare, med_update
     from cslx.sensor import triangulate
 
     _, sigma, loading = unpack(theta)
@@ -226,7 +226,7 @@ def surrogate_loss(theta, images, gts, sensor, cfg):
     import jax
     import jax.numpy as jnp
 
-    from cslx.colour import monochrome
+    from cslx.segmentation.colour import monochrome
 
     w, _, _ = unpack(theta)
 
@@ -310,7 +310,7 @@ def train(images, gts, sensor, cfg, log=print):
 
 def _render(kinds, nuisances, n, seed):
     """Frames per (kind, nuisance): seed + 10·k + j per condition, stated in the output."""
-    from cslx.synth import render_dataset
+    from cslx.sim import render_dataset
 
     out = []
     for j, nuisance in enumerate(nuisances):
@@ -338,7 +338,7 @@ def _point_errors(uv, gt_xyz, sensor, plane):
 
 def evaluate(sets, settings, stripes=("h", "v")):
     """Hard pipeline (`segment.extract(..., "med")`) with given settings; pooled metrics."""
-    from cslx.segment import centres_to_pixels, extract
+    from cslx.segmentation import centres_to_pixels, extract
 
     rows = []
     for kind, nuisance, seed, images, gt, sensor in sets:
@@ -394,7 +394,7 @@ def main(out: str = str(RESULTS), quick: bool = False, **overrides):
     import jax
     import jax.numpy as jnp
 
-    from cslx._provenance import md_table, provenance, provenance_md, write_csv
+    from cslx.provenance import md_table, provenance, provenance_md, write_csv
 
     cfg = dict(CONFIG)
     if quick:

@@ -1,1 +1,0 @@
-"""Subcommands of the `cslx` command line, one module each (see `cslx.cli`)."""

@@ -1,0 +1,83 @@
+"""Process-wide settings that entry points set explicitly; importing cslx sets none of them.
+
+- **BLAS threads.** JAX's CPU linear algebra (the Cholesky solve of MED's Toeplitz system)
+  calls LAPACK through SciPy's OpenBLAS. On a loaded 2-core machine OpenBLAS's threaded
+  Cholesky of a 240–320 sized matrix was 100–1000× slower than single-threaded (one MED
+  iteration took 175–760 ms instead of 0.5 ms), and XLA already runs its own threads.
+  `OPENBLAS_NUM_THREADS` works only before NumPy loads, so `configure` sets it and also
+  limits the already-loaded BLAS pools with threadpoolctl.
+- **Compile cache.** A persistent XLA compilation cache makes the second start of a
+  command (the tracker's 12–20 s compile) take a fraction of a second.
+- **Quiet CPU start.** On a machine without accelerators JAX probes for a TPU backend and
+  logs a warning; `configure` pins the platform to the CPU when nothing else is asked for.
+
+The `cslx` command line, the experiments, the notebooks and the tests call `configure()`
+first; a robot runtime that imports cslx decides for itself.
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["configure", "limit_blas_threads", "set_compile_cache"]
+
+_limiter = None
+
+
+def limit_blas_threads(threads: int | str | None = None) -> None:
+    """Limit every BLAS library of this process to `threads` (default CSLX_BLAS_THREADS or 1).
+
+    "off" leaves BLAS alone.
+    """
+    global _limiter
+    setting = str(threads if threads is not None else os.environ.get("CSLX_BLAS_THREADS", "1"))
+    setting = setting.strip().lower()
+    if setting in ("off", "none", ""):
+        return
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", setting)
+    try:
+        import scipy.linalg  # noqa: F401  (load SciPy's OpenBLAS so that it is limited too)
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    _limiter = threadpool_limits(limits=int(setting), user_api="blas")
+
+
+def set_compile_cache(directory: str | os.PathLike, min_compile_s: float = 0.0) -> None:
+    """Use a persistent XLA compilation cache in `directory` (created if missing)."""
+    import jax
+
+    os.makedirs(directory, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", os.fspath(directory))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_s))
+
+
+def configure(
+    *,
+    blas_threads: int | str | None = None,
+    compile_cache: str | os.PathLike | None = None,
+    quiet_cpu: bool = True,
+) -> None:
+    """Set the process-wide settings an entry point wants (see the module docstring).
+
+    Args:
+        blas_threads: BLAS threads (default: CSLX_BLAS_THREADS, else 1; "off" to leave alone).
+        compile_cache: a persistent compilation cache folder (default: CSLX_JAX_CACHE, if set).
+        quiet_cpu: when JAX_PLATFORMS is unset and no accelerator plugin is installed, pin
+            JAX to the CPU so that it does not probe (and warn about) a TPU backend.
+    """
+    if quiet_cpu and "JAX_PLATFORMS" not in os.environ and not _accelerator_installed():
+        os.environ["JAX_PLATFORMS"] = "cpu"
+    limit_blas_threads(blas_threads)
+    cache = compile_cache or os.environ.get("CSLX_JAX_CACHE")
+    if cache:
+        set_compile_cache(cache)
+
+
+def _accelerator_installed() -> bool:
+    import importlib.util
+
+    return any(
+        importlib.util.find_spec(name) is not None
+        for name in ("jax_cuda12_plugin", "jax_cuda13_plugin", "jax_rocm60_plugin", "libtpu")
+    )

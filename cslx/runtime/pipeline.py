@@ -1,0 +1,464 @@
+"""The whole per-frame pipeline in one compiled function: RGB frame → stripes → 3-D → weld.
+
+One frame (DESIGN.md, "Pipeline"):
+
+1. colour space, eq. (8): I = w_r R + w_g G + w_b B (static weights, R − G by default);
+2. MED, eqs. (18)–(24): one FIR filter down the columns (horizontal stripe) and one along
+   the rows (vertical stripe), each warm-started from the previous frame's filter held in
+   `PipelineState` (DESIGN.md correction 5), delay-compensated (correction 6);
+3. Steger's detector on each MED output: one sub-pixel centre per column / per row;
+4. triangulation (correction 3 of eq. (27)) on plane 0 / plane 1 into the robot frame;
+5. weld features (`cslx.runtime.weld.weld_features`): the followed bead on the horizontal stripe,
+   a crossing bead (T-junction) on the vertical stripe.
+
+Tracking mode (region of interest). In video the stripes barely move between frames, so
+after a frame where both stripes were found the next frame processes only a band of
+``2·roi_half_h`` rows around the horizontal stripe (all columns) and a band of
+``2·roi_half_w`` columns around the vertical stripe (all rows). The band sizes are static,
+their offsets dynamic (`lax.dynamic_slice`), so one compiled program serves every frame;
+`lax.cond` picks the band branch or the full-frame branch (on the CPU only the chosen branch
+runs). The MED filters of the bands are shorter (``L_roi``, a band is a short segment) and
+kept apart from the full-frame filters. A stripe that leaves its band, or too few centres,
+switches the next frame back to the full frame. Centres outside the band are reported as not
+found; inside it they agree with full-frame processing (tests/test_pipeline.py).
+
+Everything is pure JAX on one frame and jit-compiled at `process_frame`; `process_batch`
+vmaps it over frames (under vmap `lax.cond` evaluates both branches: archives should use
+the full frame, ``roi=False``).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array, Bool, Float, Int, UInt8
+
+from ..segmentation.med import default_filter_length, initial_filter, med
+from ..segmentation.steger import Centres, steger_centres
+from ..sensor import Sensor, triangulate
+from .weld import WeldConfig, WeldFeature, weld_features
+
+__all__ = [
+    "FrameResult",
+    "PipelineConfig",
+    "PipelineState",
+    "frame_summary",
+    "init_state",
+    "process_batch",
+    "process_frame",
+    "SUMMARY_FIELDS",
+    "stripe_points",
+    "clean_profile",
+]
+
+
+class PipelineConfig(eqx.Module):
+    """Settings of the per-frame pipeline; every field shapes the compiled program (static).
+
+    weights: colour weights (w_r, w_g, w_b) of eq. (8); default R − G (the paper's space).
+    L_h / L_v: full-frame MED filter lengths for the horizontal (down columns) and vertical
+        (along rows) stripe; None = 50 % of the segment (the paper's choice, correction 7).
+    L_roi: MED filter length inside the tracking bands (≤ the band size).
+    max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
+        for the full frame; roi_max_steps for the bands (warm-started: a few steps suffice).
+    sigma: Steger scale, px. threshold / snr: Steger's relative and noise-floor thresholds.
+    roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
+        half-width of the column band around the vertical stripe, px; 0 disables the ROI.
+    roi_margin: a stripe closer than this to its band's edge ends tracking mode.
+    min_valid_fraction: share of columns (rows) with a centre needed to keep tracking mode.
+    median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
+        (`clean_profile`: gross outliers out, light smoothing along the stripe).
+    use_med: False skips MED (Steger on the monochrome image), for ablations.
+    roi_med: run MED inside the tracking bands too. Off by default: on bands of 64–192
+        samples MED's filter (L_roi 16–64, warm-started) shifted the sunny-frame centres by
+        a median 1.0–1.9 px where full-frame MED and Steger on the band both stay at
+        0.1–0.2 px (measured on rendered "sunny" frames); the short segments with their
+        tapered ends seem to defeat the delay estimate. With it off, tracking mode is Steger
+        on the colour-space band, warm state unused, and matches full-frame accuracy.
+    weld: the bead detector's settings. The junction threshold is lowered to 0.1 (the
+        detector's default is 0.3): on rendered T frames the crossing bead on the vertical
+        stripe is found at the right x_r (±0.5 mm) with confidence 0.15–0.25, and no
+        straight frame gave a vertical bead at all; the tracker confirms a junction over
+        two frames before reporting it.
+    """
+
+    weights: tuple[float, float, float] = eqx.field(static=True, default=(1.0, -1.0, 0.0))
+    L_h: int | None = eqx.field(static=True, default=None)
+    L_v: int | None = eqx.field(static=True, default=None)
+    L_roi: int = eqx.field(static=True, default=16)
+    max_steps: int = eqx.field(static=True, default=30)
+    roi_max_steps: int = eqx.field(static=True, default=6)
+    tol: float = eqx.field(static=True, default=1e-4)
+    sigma: float = eqx.field(static=True, default=2.0)
+    threshold: float = eqx.field(static=True, default=0.1)
+    snr: float = eqx.field(static=True, default=5.0)
+    roi_half_h: int = eqx.field(static=True, default=32)
+    roi_half_w: int = eqx.field(static=True, default=64)
+    roi_margin: int = eqx.field(static=True, default=8)
+    min_valid_fraction: float = eqx.field(static=True, default=0.5)
+    median_half: int = eqx.field(static=True, default=4)
+    outlier_mm: float = eqx.field(static=True, default=1.0)
+    smooth_half: int = eqx.field(static=True, default=3)
+    use_med: bool = eqx.field(static=True, default=True)
+    roi_med: bool = eqx.field(static=True, default=False)
+    weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
+
+    def lengths(self, height: int, width: int) -> tuple[int, int]:
+        """Full-frame filter lengths (L_h, L_v) for an (height, width) frame."""
+        L_h = default_filter_length(height) if self.L_h is None else self.L_h
+        L_v = default_filter_length(width) if self.L_v is None else self.L_v
+        return L_h, L_v
+
+    def roi_enabled(self, height: int, width: int) -> bool:
+        return 0 < 2 * self.roi_half_h < height and 0 < 2 * self.roi_half_w < width
+
+
+class PipelineState(eqx.Module):
+    """What one frame hands to the next: MED filters (warm start) and the tracking bands.
+
+    filter_h / filter_v: full-frame filters (L_h,), (L_v,); roi_filter_h / roi_filter_v:
+    band filters (L_roi,). row0: first row of the horizontal stripe's band; col0: first
+    column of the vertical stripe's band; tracking: process the bands (True) or the full
+    frame (False) next.
+    """
+
+    filter_h: Float[Array, " Lh"]
+    filter_v: Float[Array, " Lv"]
+    roi_filter_h: Float[Array, " Lr"]
+    roi_filter_v: Float[Array, " Lr"]
+    row0: Int[Array, ""]
+    col0: Int[Array, ""]
+    tracking: Bool[Array, ""]
+
+
+class FrameResult(NamedTuple):
+    """Everything the pipeline found in one frame (leading batch axis under vmap).
+
+    centres_h: per-column centres of the horizontal stripe (W,); centres_v: per-row centres
+    of the vertical stripe (H,) (OpenCV pixels; NaN where not valid). points_h (W, 3),
+    points_v (H, 3): robot-frame points, mm, after `clean_profile` (outliers dropped,
+    lightly smoothed; NaN where not valid or dropped). feature_h / feature_v:
+    the beads (`cslx.runtime.weld.WeldFeature`); junction: the T-junction flag. med_steps: (2,)
+    fixed-point steps (h, v); kurtosis: (2,) excess kurtosis of the MED outputs. used_roi:
+    the bands were processed (tracking mode). brightness: mean grey level of the frame
+    (0..255); saturated: fraction of pixels with a channel at 255.
+    """
+
+    centres_h: Centres
+    centres_v: Centres
+    points_h: Float[Array, "w 3"]
+    points_v: Float[Array, "h 3"]
+    feature_h: WeldFeature
+    feature_v: WeldFeature
+    junction: Bool[Array, ""]
+    med_steps: Int[Array, " 2"]
+    kurtosis: Float[Array, " 2"]
+    used_roi: Bool[Array, ""]
+    brightness: Float[Array, ""]
+    saturated: Float[Array, ""]
+
+
+def init_state(
+    config: PipelineConfig, image_size: tuple[int, int], dtype=jnp.float32
+) -> PipelineState:
+    """Cold state: Table 2's flat filters (W = 1/√L) and full-frame processing first.
+
+    Args:
+        config: the pipeline settings.
+        image_size: (W, H) in pixels, as `Camera.image_size`.
+        dtype: float dtype of the filters (float32 is the speed path).
+    """
+    width, height = image_size
+    L_h, L_v = config.lengths(height, width)
+    return PipelineState(
+        filter_h=initial_filter("flat", L_h, dtype),
+        filter_v=initial_filter("flat", L_v, dtype),
+        roi_filter_h=initial_filter("flat", config.L_roi, dtype),
+        roi_filter_v=initial_filter("flat", config.L_roi, dtype),
+        row0=jnp.zeros((), jnp.int32),
+        col0=jnp.zeros((), jnp.int32),
+        tracking=jnp.zeros((), bool),
+    )
+
+
+def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med):
+    """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis)."""
+    if use_med:
+        r = med(I, axis=axis, L=L, init=W0, tol=config.tol, max_steps=max_steps)
+        ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
+        # A black or clipped frame has no variance: keep the old filter, never a NaN one.
+        W = jnp.where(ok, r.filter, W0)
+        B = jnp.where(ok, r.output, I)
+        steps, kurt = r.steps.astype(jnp.int32), jnp.where(ok, r.kurtosis, jnp.nan)
+    else:
+        W, B, steps, kurt = W0, I, jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan, I.dtype)
+    c = steger_centres(B, sigma=config.sigma, axis=axis, threshold=config.threshold, snr=config.snr)
+    return c, W, steps, kurt
+
+
+def _shift(c: Centres, offset) -> Centres:
+    return Centres(c.pos + offset.astype(c.pos.dtype), c.valid, c.strength)
+
+
+def _full(I, state: PipelineState, config: PipelineConfig):
+    height, width = I.shape
+    L_h, L_v = config.lengths(height, width)
+    ch, Wh, sh, kh = _stripe(I, state.filter_h, 0, L_h, config, config.max_steps, config.use_med)
+    cv, Wv, sv, kv = _stripe(I, state.filter_v, 1, L_v, config, config.max_steps, config.use_med)
+    new = eqx.tree_at(lambda s: (s.filter_h, s.filter_v), state, (Wh, Wv))
+    return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new
+
+
+def _bands(I, state: PipelineState, config: PipelineConfig):
+    height, width = I.shape
+    hh, hw = 2 * config.roi_half_h, 2 * config.roi_half_w
+    band_h = lax.dynamic_slice(I, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
+    band_v = lax.dynamic_slice(I, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
+    med_on = config.use_med and config.roi_med
+    ch, Wh, sh, kh = _stripe(
+        band_h, state.roi_filter_h, 0, config.L_roi, config, config.roi_max_steps, med_on
+    )
+    cv, Wv, sv, kv = _stripe(
+        band_v, state.roi_filter_v, 1, config.L_roi, config, config.roi_max_steps, med_on
+    )
+    new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
+    return (
+        _shift(ch, state.row0),
+        _shift(cv, state.col0),
+        jnp.stack([sh, sv]),
+        jnp.stack([kh, kv]),
+        new,
+    )
+
+
+def _next_bands(ch: Centres, cv: Centres, state, config: PipelineConfig, shape):
+    """Centre the bands on this frame's stripes; track only when both fit inside them."""
+    height, width = shape
+    hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
+
+    def band(c: Centres, half, size, n):
+        pos = jnp.where(c.valid, c.pos, jnp.nan)
+        centre = jnp.nanmedian(pos)
+        start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
+        # Nearly all centres must lie inside the new band, away from its edges (a stripe
+        # at the image border may touch the band's edge there); stray false centres may not.
+        lo = jnp.where(start == 0, -jnp.inf, start + m)
+        hi = jnp.where(start == size - 2 * half, jnp.inf, start + 2 * half - 1 - m)
+        inside = jnp.sum(c.valid & (c.pos >= lo) & (c.pos <= hi))
+        n_valid = jnp.sum(c.valid)
+        fits = inside >= 0.98 * n_valid
+        enough = n_valid >= config.min_valid_fraction * n
+        return start, fits & enough & jnp.isfinite(centre)
+
+    row0, ok_h = band(ch, hh, height, width)
+    col0, ok_v = band(cv, hw, width, height)
+    tracking = ok_h & ok_v
+    return eqx.tree_at(
+        lambda s: (s.row0, s.col0, s.tracking),
+        state,
+        (jnp.where(ok_h, row0, state.row0), jnp.where(ok_v, col0, state.col0), tracking),
+    )
+
+
+def stripe_points(sensor: Sensor, c: Centres, axis: int, plane: int, dtype):
+    """Triangulate valid centres into the robot frame; NaN rows where not valid."""
+    n = c.pos.shape[0]
+    index = jnp.arange(n, dtype=dtype)
+    # Invalid centres get a harmless pixel so the undistortion fixed point converges fast.
+    pos = jnp.where(c.valid, c.pos, 0.5 * n).astype(dtype)
+    uv = jnp.stack([index, pos] if axis == 0 else [pos, index], axis=-1)
+    X = triangulate(sensor, uv, plane, robot_frame=True)
+    return jnp.where(c.valid[:, None], X, jnp.nan)
+
+
+def _windows(x: Array, k: int, fill) -> Array:
+    """(N, 2k+1) stack of x shifted by −k..k along the first axis (``fill`` past the ends)."""
+    pad = [(k, k)] + [(0, 0)] * (x.ndim - 1)
+    xp = jnp.pad(x, pad, constant_values=fill)
+    n = x.shape[0]
+    return jnp.stack([lax.slice_in_dim(xp, j, j + n) for j in range(2 * k + 1)], axis=1)
+
+
+def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: PipelineConfig):
+    """Drop gross 3-D outliers and lightly smooth a stripe profile before the weld features.
+
+    A centre picked on the wrong ridge (where the stripes cross, a glint) triangulates tens
+    or hundreds of mm off the wall and splits the bead's run of high points; a point is
+    dropped when its z_r is more than ``outlier_mm`` from the median z_r of its
+    2·``median_half``+1 neighbours. The rest is averaged over 2·``smooth_half``+1 valid
+    neighbours (≈ 1–2 mm of wall, 10× narrower than a bead; the points stay on the laser
+    plane), which lowers the speckle noise of the profile by ≈ √(2·smooth_half+1).
+    """
+    z = jnp.where(valid, P[:, 2], jnp.nan)
+    med = jnp.nanmedian(_windows(z, config.median_half, jnp.nan), axis=1)
+    keep = valid & (jnp.abs(z - med) <= config.outlier_mm)
+    if config.smooth_half > 0:
+        w = _windows(keep.astype(P.dtype), config.smooth_half, 0.0)
+        X = _windows(jnp.where(keep[:, None], P, 0.0), config.smooth_half, 0.0)
+        count = jnp.sum(w, axis=1)
+        P = jnp.sum(X, axis=1) / jnp.maximum(count, 1.0)[:, None]
+    return jnp.where(keep[:, None], P, jnp.nan), keep
+
+
+def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
+    height, width = rgb.shape[:2]
+    dtype = state.filter_h.dtype
+    x = rgb.astype(dtype)
+    I = x @ jnp.asarray(config.weights, dtype)
+    if roi and config.roi_enabled(height, width):
+        ch, cv, steps, kurt, new = lax.cond(
+            state.tracking,
+            lambda: _bands(I, state, config),
+            lambda: _full(I, state, config),
+        )
+        used_roi = state.tracking
+    else:
+        ch, cv, steps, kurt, new = _full(I, state, config)
+        used_roi = jnp.zeros((), bool)
+    new = _next_bands(ch, cv, new, config, (height, width))
+    Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
+    Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)
+    fh, fv, junction = weld_features(Ph, keep_h, Pv, keep_v, config.weld)
+    result = FrameResult(
+        centres_h=ch,
+        centres_v=cv,
+        points_h=Ph,
+        points_v=Pv,
+        feature_h=fh,
+        feature_v=fv,
+        junction=junction,
+        med_steps=steps,
+        kurtosis=kurt.astype(dtype),
+        used_roi=used_roi,
+        brightness=jnp.mean(x),
+        saturated=jnp.mean(jnp.any(rgb >= 255, axis=-1).astype(dtype)),
+    )
+    return result, new
+
+
+def _check_frame(sensor: Sensor, rgb) -> None:
+    width, height = sensor.camera.image_size
+    if rgb.ndim != 3 or rgb.shape[-1] != 3:
+        raise ValueError(f"expected an RGB frame of shape (H, W, 3), got shape {rgb.shape}")
+    if rgb.shape[:2] != (height, width):
+        raise ValueError(
+            f"frame is {rgb.shape[1]}×{rgb.shape[0]} px but the calibration is {width}×{height}"
+        )
+    if rgb.dtype != jnp.uint8:
+        raise ValueError(f"expected a uint8 frame, got dtype {rgb.dtype}")
+
+
+@functools.partial(jax.jit, static_argnames=("roi",))
+def _process_frame(sensor, config, rgb, state, roi):
+    return _process(sensor, config, rgb, state, roi)
+
+
+def process_frame(
+    sensor: Sensor,
+    config: PipelineConfig,
+    rgb: UInt8[Array, "h w 3"],
+    state: PipelineState,
+    *,
+    roi: bool = True,
+) -> tuple[FrameResult, PipelineState]:
+    """Run the whole pipeline on one RGB frame (module docstring), jit-compiled.
+
+    Args:
+        sensor: the calibrated sensor (its image size must match the frame).
+        config: `PipelineConfig` (static: a new config compiles a new program).
+        rgb: (H, W, 3) uint8 RGB frame.
+        state: `PipelineState` from `init_state` or the previous frame.
+        roi: allow tracking mode (bands around the last stripes); False always processes the
+            full frame (still warm-starting MED from `state`).
+
+    Returns:
+        (`FrameResult`, the state for the next frame).
+    """
+    rgb = jnp.asarray(rgb)
+    _check_frame(sensor, rgb)
+    return _process_frame(sensor, config, rgb, state, roi)
+
+
+@functools.partial(jax.jit, static_argnames=("roi",))
+def _process_batch(sensor, config, frames, state, roi):
+    return jax.vmap(lambda f: _process(sensor, config, f, state, roi))(frames)
+
+
+def process_batch(
+    sensor: Sensor,
+    config: PipelineConfig,
+    frames: UInt8[Array, "f h w 3"],
+    state: PipelineState | None = None,
+    *,
+    roi: bool = False,
+) -> tuple[FrameResult, PipelineState]:
+    """`process_frame` on independent frames (vmap), all starting from the same state.
+
+    For archives of unrelated frames; the results carry a leading frame axis. The default
+    state is `init_state` (cold, flat MED filters) and the full frame is processed.
+    """
+    frames = jnp.asarray(frames)
+    if frames.ndim != 4:
+        raise ValueError(f"expected frames of shape (F, H, W, 3), got shape {frames.shape}")
+    _check_frame(sensor, frames[0])
+    if state is None:
+        state = init_state(config, sensor.camera.image_size)
+    return _process_batch(sensor, config, frames, state, roi)
+
+
+#: Names of the entries of `frame_summary`, in order.
+SUMMARY_FIELDS = (
+    "h_found",
+    "h_x_mm",
+    "h_y_mm",
+    "h_z_mm",
+    "h_width_mm",
+    "h_height_mm",
+    "h_confidence",
+    "v_found",
+    "v_x_mm",
+    "v_confidence",
+    "junction",
+    "med_steps_h",
+    "med_steps_v",
+    "used_roi",
+    "n_valid_h",
+    "n_valid_v",
+    "brightness",
+    "saturated",
+)
+
+
+def frame_summary(result: FrameResult) -> Float[Array, " k"]:
+    """The few numbers a tracker needs from a frame, as one small vector (`SUMMARY_FIELDS`).
+
+    One device→host transfer of this vector per frame is all the tracker's I/O.
+    """
+    fh, fv = result.feature_h, result.feature_v
+    dtype = fh.confidence.dtype
+    vals = [
+        fh.found,
+        fh.centre[0],
+        fh.centre[1],
+        fh.centre[2],
+        fh.width,
+        fh.height,
+        fh.confidence,
+        fv.found,
+        fv.position,
+        fv.confidence,
+        result.junction,
+        result.med_steps[0],
+        result.med_steps[1],
+        result.used_roi,
+        jnp.sum(result.centres_h.valid),
+        jnp.sum(result.centres_v.valid),
+        result.brightness,
+        result.saturated,
+    ]
+    return jnp.stack([jnp.asarray(v).astype(dtype) for v in vals])

@@ -1,0 +1,434 @@
+"""The weld tracker the robot runtime imports: compiled pipeline + state + a small Kalman filter.
+
+`Tracker.from_calibration(path_or_sensor)` compiles `cslx.runtime.pipeline` once at start-up (the
+compile time is logged; with JAX's persistent compilation cache, which the entry point sets
+with `cslx.environment.configure(compile_cache=...)`, a second start-up loads the program
+instead of compiling it), then `step(frame)` runs one
+frame: the pipeline state (MED filters warm-started frame to frame, the tracking bands) stays
+on the device, and one small vector (`cslx.runtime.pipeline.SUMMARY_FIELDS`) comes back to the host.
+
+Weld-line model (section 4.3 of the paper gives none; this is cslx's). In the robot frame
+(DESIGN.md) the followed weld is the line y_r = e + tan θ · (x_r − x_ref), with x_ref the
+x_r where the horizontal stripe meets the wall (150 mm on the default rig): e is the
+lateral offset (mm, + = weld to the robot's left) and θ the heading (rad, CCW +). A Kalman
+filter over s = (e, θ):
+
+- predict, per frame, from the robot's motion since the last frame: forward distance d
+  (mm) and heading change δ (rad, CCW +), from telemetry when the caller passes
+  ``odometry``, else nominal ``speed_mm_s`` × dt (dt from the caller, else 1/fps; 30 mm/s at
+  20 fps = 1.5 mm) and δ = 0. To first order the line seen from the moved robot is
+  e' = e + d·θ − x_ref·δ, θ' = θ − δ, i.e. F = [[1, d], [0, 1]] with the input
+  (−x_ref δ, −δ); process noise Q = diag(q_e², q_θ²)·|d| (a random walk per mm travelled:
+  weld waviness and odometry error) + a small floor.
+- update with the horizontal stripe's bead centre (x_c, y_c) of this frame: y_c = e + θ (x_c −
+  x_ref) + noise, H = [1, x_c − x_ref], R = σ_meas² / max(confidence, 0.05).
+  One frame observes only e (x_c ≈ x_ref); θ becomes observable through the d·θ term, i.e.
+  through the bead centres of past frames carried into the current frame by odometry —
+  the same information as a line fit through them (`cslx.runtime.weld.weld_line_from_features`).
+- gating: an innovation beyond `gate` standard deviations is rejected; after
+  `reset_after` rejections in a row (a new weld after a T-junction turn, or a lost track)
+  the filter restarts at the measurement with θ = 0 and a broad covariance.
+
+Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
+
+Confidence ∈ [0, 1]: the bead detector's confidence (square-rooted: the product of four
+factors in `cslx.runtime.weld` is ≈ 0.2–0.7 on good rendered frames) when a bead was accepted,
+otherwise the previous value × `decay` per frame (the prediction stays useful for a few
+frames); times 1 / (1 + (σ_e / 2 mm)²). Frames that cannot be used at all (None, wrong size or
+dtype, black, saturated, no stripe) give confidence 0, NaN values and a log line; `step`
+never raises on a frame.
+
+Junction: the pipeline flags a crossing bead on the vertical stripe at x_r = x_j; the
+tracker reports it once two sightings within `junction_window` frames agree within
+`junction_tol_mm` after moving the older one by odometry (x_j −= d), which suppresses
+single-frame false alarms.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+__all__ = ["KalmanConfig", "Observation", "Tracker", "LOG_FIELDS"]
+
+#: The tracking-log columns of DESIGN.md ("Tracking log"), in order.
+LOG_FIELDS = (
+    "frame",
+    "source",
+    "t_s",
+    "offset_mm",
+    "heading_deg",
+    "bead_width_mm",
+    "bead_height_mm",
+    "junction",
+    "junction_x_mm",
+    "confidence",
+    "latency_ms",
+)
+
+NAN = math.nan
+
+
+@dataclasses.dataclass(frozen=True)
+class KalmanConfig:
+    """Tuning of the weld-line filter (module docstring). mm, rad, frames."""
+
+    q_offset: float = 0.08  # mm per √mm travelled
+    q_heading: float = 0.002  # rad per √mm travelled
+    q_floor: float = 1e-4  # mm², rad² per frame (a robot at rest drifts a little too)
+    sigma_meas: float = 0.35  # mm, at confidence 1
+    init_offset_std: float = 2.0  # mm
+    init_heading_std: float = math.radians(10.0)
+    gate: float = 4.0  # innovation standard deviations
+    reset_after: int = 4  # rejected measurements in a row
+    heading_valid_deg: float = 3.0
+    decay: float = 0.85  # confidence per frame without a bead
+    junction_window: int = 10
+    junction_tol_mm: float = 6.0
+
+
+@dataclasses.dataclass
+class Observation:
+    """What the tracker reports for one frame (DESIGN.md tracking-log meanings; NaN = unknown).
+
+    frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
+    filtered weld line. bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
+    junction, junction_x_mm: a confirmed crossing weld and its x_r. confidence: [0, 1].
+    latency_ms: wall time of `step`. med_steps: MED fixed-point steps (h + v) this frame.
+    status: "ok", "no bead", or why the frame was unusable. raw: the pipeline's per-frame
+    values (`cslx.runtime.pipeline.SUMMARY_FIELDS`) plus `measured_offset_mm` (this frame's bead
+    y_r moved to x_ref with the filtered heading) and `accepted` (the update was used).
+    """
+
+    frame: int
+    t: float
+    offset_mm: float = NAN
+    heading_deg: float = NAN
+    bead_width_mm: float = NAN
+    bead_height_mm: float = NAN
+    junction: bool = False
+    junction_x_mm: float = NAN
+    confidence: float = 0.0
+    latency_ms: float = NAN
+    med_steps: int = 0
+    status: str = "ok"
+    raw: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def to_message(self):
+        """The `cslx.runtime.Observation` sent over the serial link."""
+        from .protocol import Observation as Message
+
+        return Message(
+            self.t,
+            self.offset_mm,
+            self.heading_deg,
+            self.bead_width_mm,
+            self.bead_height_mm,
+            bool(self.junction),
+            self.junction_x_mm,
+            self.confidence,
+        )
+
+    def log_row(self, source: str = "") -> dict[str, Any]:
+        """One row of the tracking log: the DESIGN.md columns, then the extras."""
+        row = {
+            "frame": self.frame,
+            "source": source,
+            "t_s": self.t,
+            "offset_mm": self.offset_mm,
+            "heading_deg": self.heading_deg,
+            "bead_width_mm": self.bead_width_mm,
+            "bead_height_mm": self.bead_height_mm,
+            "junction": int(bool(self.junction)),
+            "junction_x_mm": self.junction_x_mm,
+            "confidence": self.confidence,
+            "latency_ms": self.latency_ms,
+            "med_steps": self.med_steps,
+            "status": self.status,
+        }
+        for k in ("measured_offset_mm", "h_confidence", "v_x_mm", "v_confidence", "used_roi"):
+            row[k] = self.raw.get(k, NAN)
+        return row
+
+
+class _WeldLineFilter:
+    """Kalman filter over (offset e mm, heading θ rad); see the module docstring."""
+
+    def __init__(self, config: KalmanConfig, x_ref: float):
+        self.c = config
+        self.x_ref = x_ref
+        self.reset()
+
+    def reset(self) -> None:
+        self.x: np.ndarray | None = None
+        self.P = np.zeros((2, 2))
+        self.rejected = 0
+
+    @property
+    def initialised(self) -> bool:
+        return self.x is not None
+
+    def predict(self, d: float, delta: float) -> None:
+        if self.x is None:
+            return
+        c = self.c
+        F = np.array([[1.0, d], [0.0, 1.0]])
+        self.x = F @ self.x + np.array([-self.x_ref * delta, -delta])
+        Q = np.diag([c.q_offset**2, c.q_heading**2]) * abs(d) + c.q_floor * np.eye(2)
+        self.P = F @ self.P @ F.T + Q
+
+    def start(self, y: float) -> None:
+        c = self.c
+        self.x = np.array([y, 0.0])
+        self.P = np.diag([c.init_offset_std**2, c.init_heading_std**2])
+        self.rejected = 0
+
+    def update(self, x_c: float, y_c: float, confidence: float) -> bool:
+        """Fuse one bead centre; False if gated out (the filter may restart)."""
+        c = self.c
+        if self.x is None:
+            self.start(y_c)
+            return True
+        H = np.array([1.0, x_c - self.x_ref])
+        R = c.sigma_meas**2 / max(confidence, 0.05)
+        S = H @ self.P @ H + R
+        nu = y_c - H @ self.x
+        if nu * nu > c.gate**2 * S:
+            self.rejected += 1
+            if self.rejected >= c.reset_after:
+                self.start(y_c)
+                return True
+            return False
+        K = self.P @ H / S
+        self.x = self.x + K * nu
+        self.P = (np.eye(2) - np.outer(K, H)) @ self.P
+        self.P = 0.5 * (self.P + self.P.T)
+        self.rejected = 0
+        return True
+
+
+def _logger(log) -> Callable[[str], None]:
+    if log is None:
+        log = logging.getLogger("cslx.runtime.tracker")
+    if isinstance(log, logging.Logger):
+        return log.info
+    return log
+
+
+class Tracker:
+    """Compiled per-frame pipeline, its device state, the weld-line filter and junction logic.
+
+    Build it with `from_calibration`; call `step(frame)` per frame (module docstring).
+    Attributes: sensor, config (`cslx.runtime.pipeline.PipelineConfig`), kalman (`KalmanConfig`),
+    compile_s (start-up compile time, s), frame (frames stepped so far).
+    """
+
+    def __init__(
+        self,
+        sensor,
+        config=None,
+        *,
+        kalman: KalmanConfig | None = None,
+        speed_mm_s: float = 30.0,
+        fps: float = 20.0,
+        roi: bool = True,
+        log: logging.Logger | Callable[[str], None] | None = None,
+    ):
+        import jax
+        import jax.numpy as jnp
+
+        from . import pipeline as pl
+
+        self._log = _logger(log)
+        # float32 is the speed path (DESIGN.md performance facts).
+        self.sensor = jax.tree_util.tree_map(
+            lambda x: jnp.asarray(x, jnp.float32) if isinstance(x, jax.Array) else x, sensor
+        )
+        self.config = config or pl.PipelineConfig()
+        self.kalman = kalman or KalmanConfig()
+        self.speed_mm_s = float(speed_mm_s)
+        self.fps = float(fps)
+        width, height = self.sensor.camera.image_size
+        self.image_shape = (int(height), int(width), 3)
+        self.x_ref = float(np.asarray(self._stripe_x(), float))
+        self._fields = pl.SUMMARY_FIELDS
+        self._state0 = pl.init_state(self.config, (width, height), jnp.float32)
+
+        sensor32, config_ = self.sensor, self.config
+
+        def _step(rgb, state):
+            result, new = pl._process(sensor32, config_, rgb, state, roi)
+            return pl.frame_summary(result), new
+
+        t0 = time.perf_counter()
+        spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
+        self._compiled = jax.jit(_step).lower(spec, self._state0).compile()
+        self.compile_s = time.perf_counter() - t0
+        cache = jax.config.jax_compilation_cache_dir
+        self._log(
+            f"tracker: compiled the {width}×{height} pipeline in {self.compile_s:.2f} s"
+            + (f" (persistent cache {cache})" if cache else " (no persistent compile cache)")
+        )
+        self.reset()
+
+    @classmethod
+    def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
+        """A tracker for a calibration JSON file (DESIGN.md contract) or a `Sensor`.
+
+        Keyword arguments go to `Tracker` (kalman, speed_mm_s, fps, roi).
+        Raises `cslx.sensor.CalibrationError` for a bad file.
+        """
+        from ..sensor import Sensor, load_sensor
+
+        sensor = path_or_sensor
+        if not isinstance(sensor, Sensor):
+            sensor = load_sensor(path_or_sensor)
+        return cls(sensor, config, log=log, **kwargs)
+
+    def _stripe_x(self) -> float:
+        """x_r where the horizontal stripe meets the wall (z_r = 0) below the optical axis."""
+        from ..sensor import triangulate
+
+        cam = self.sensor.camera
+        X = triangulate(
+            self.sensor, np.array([[float(cam.u0), float(cam.v0)]], np.float32), 0, robot_frame=True
+        )
+        return float(np.asarray(X)[0, 0])
+
+    def reset(self) -> None:
+        """Forget everything learnt from past frames (state, filter, junction sightings)."""
+        self._state = self._state0
+        self.filter = _WeldLineFilter(self.kalman, self.x_ref)
+        self.frame = 0
+        self._t = 0.0
+        self._confidence = 0.0
+        self._sightings: list[tuple[int, float]] = []  # (frame, x_j moved to now)
+
+    # ------------------------------------------------------------------------------- step
+    def _motion(self, dt, odometry) -> tuple[float, float]:
+        if odometry is None:
+            return self.speed_mm_s * dt, 0.0
+        if isinstance(odometry, int | float):
+            return float(odometry), 0.0
+        d, delta = odometry
+        return float(d), float(delta)
+
+    def _bad(self, obs: Observation, why: str) -> Observation:
+        obs.status = why
+        obs.confidence = 0.0
+        self._confidence = 0.0
+        self._log(f"tracker: frame {obs.frame}: {why}")
+        return obs
+
+    def step(
+        self, frame, *, dt: float | None = None, odometry=None, t: float | None = None
+    ) -> Observation:
+        """Process one frame; never raises on a bad frame (low-confidence observation).
+
+        Args:
+            frame: (H, W, 3) uint8 RGB image of the calibrated size (or anything else, which
+                is reported as unusable).
+            dt: seconds since the previous frame (default 1/fps).
+            odometry: robot motion since the previous frame: forward distance in mm, or
+                (distance mm, heading change rad CCW +) from telemetry; default nominal
+                speed × dt, no turn.
+            t: capture time, s (default: the previous t + dt).
+        """
+        start = time.perf_counter()
+        dt = 1.0 / self.fps if dt is None or not dt > 0 else float(dt)
+        self._t = self._t + dt if t is None else float(t)
+        index, self.frame = self.frame, self.frame + 1
+        obs = Observation(frame=index, t=self._t)
+        d, delta = self._motion(dt, odometry)
+        if index > 0:
+            self.filter.predict(d, delta)
+            self._sightings = [(f, x - d) for f, x in self._sightings]
+        try:
+            why = self._check(frame)
+            if why is None:
+                obs = self._measure(np.asarray(frame), obs, d)
+            else:
+                obs = self._bad(obs, why)
+        except Exception as e:  # noqa: BLE001 — the loop must survive any frame
+            obs = self._bad(obs, f"pipeline error: {type(e).__name__}: {e}")
+        obs.latency_ms = 1000.0 * (time.perf_counter() - start)
+        return obs
+
+    def _check(self, frame) -> str | None:
+        if frame is None:
+            return "no frame"
+        if not isinstance(frame, np.ndarray):
+            kind = type(frame).__name__
+            try:
+                frame = np.asarray(frame)
+            except Exception:  # noqa: BLE001
+                return f"not an image ({kind})"
+            if frame.ndim == 0 or frame.dtype.kind not in "uifb":
+                return f"not an image ({kind})"
+        if frame.shape != self.image_shape:
+            return f"wrong frame shape {frame.shape}, expected {self.image_shape}"
+        if frame.dtype != np.uint8:
+            return f"wrong frame dtype {frame.dtype}, expected uint8"
+        return None
+
+    def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
+        summary, self._state = self._compiled(frame, self._state)
+        raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
+        obs.raw = raw
+        obs.med_steps = int(raw["med_steps_h"] + raw["med_steps_v"])
+        width, height = self.image_shape[1], self.image_shape[0]
+        if raw["brightness"] < 3.0:
+            return self._bad(obs, "black frame")
+        if raw["saturated"] > 0.5:
+            return self._bad(obs, f"saturated frame ({100 * raw['saturated']:.0f} % clipped)")
+        # Steger's noise floor leaves a few stray centres on a stripe-less frame (≈ 20 % of
+        # rows on uniform noise); a real stripe gives a centre in nearly every column/row.
+        if raw["n_valid_h"] < 0.3 * width and raw["n_valid_v"] < 0.3 * height:
+            return self._bad(obs, "no stripe found")
+
+        kf = self.filter
+        accepted = False
+        if raw["h_found"] > 0.5:
+            accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], raw["h_confidence"])
+            obs.bead_width_mm, obs.bead_height_mm = raw["h_width_mm"], raw["h_height_mm"]
+        raw["accepted"] = float(accepted)
+        if kf.initialised:
+            theta = kf.x[1]
+            raw["measured_offset_mm"] = raw["h_y_mm"] - math.tan(theta) * (
+                raw["h_x_mm"] - self.x_ref
+            )
+        else:
+            raw["measured_offset_mm"] = NAN
+        c = self.kalman
+        if accepted:
+            self._confidence = math.sqrt(max(raw["h_confidence"], 0.0))
+            obs.status = "ok"
+        else:
+            self._confidence *= c.decay
+            obs.status = "no bead" if raw["h_found"] < 0.5 else "bead rejected (gate)"
+        if kf.initialised:
+            obs.offset_mm = float(kf.x[0])
+            sd_e, sd_th = math.sqrt(kf.P[0, 0]), math.sqrt(kf.P[1, 1])
+            if math.degrees(sd_th) < c.heading_valid_deg:
+                obs.heading_deg = math.degrees(kf.x[1])
+            obs.confidence = float(np.clip(self._confidence / (1.0 + (sd_e / 2.0) ** 2), 0.0, 1.0))
+        self._junction(obs, raw)
+        return obs
+
+    def _junction(self, obs: Observation, raw: dict) -> None:
+        c = self.kalman
+        now = obs.frame
+        self._sightings = [(f, x) for f, x in self._sightings if now - f <= c.junction_window]
+        if raw["junction"] > 0.5 and math.isfinite(raw["v_x_mm"]):
+            x = raw["v_x_mm"]
+            agree = [xo for _, xo in self._sightings if abs(xo - x) <= c.junction_tol_mm]
+            self._sightings.append((now, x))
+            if agree:
+                obs.junction = True
+                obs.junction_x_mm = float(np.mean([*agree, x]))

@@ -1,0 +1,223 @@
+"""Frequency-domain kernels of the MED fixed point (private; see `cslx.segmentation.med`).
+
+Segments (image columns for the horizontal stripe) are laid out as rows of an (S, M) array
+so every FFT runs along the contiguous last axis. Two real segments a, b are packed into one
+complex signal z = a + i b: one complex FFT of length n then serves both, and the
+half-spectra are recovered with the Hermitian split
+
+    A(f) = (Z(f) + Z*(−f)) / 2,     B(f) = (Z(f) − Z*(−f)) / 2i.
+
+A real filter keeps the packing intact under multiplication, so B = W ∗ X for both
+segments comes out of a single inverse FFT as Re + i Im.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+from jaxtyping import Array, Complex, Float
+
+
+def fft_length(n: int) -> int:
+    """Smallest 5-smooth integer (2^a 3^b 5^c) ≥ n: fast FFT sizes (720 for 719)."""
+    best = 1 << max(0, math.ceil(math.log2(max(n, 1))))
+    p5 = 1
+    while p5 < 2 * n:
+        p35 = p5
+        while p35 < 2 * n:
+            m = p35
+            while m < n:
+                m *= 2
+            best = min(best, m)
+            p35 *= 3
+        p5 *= 5
+    return best
+
+
+def taper_window(m: int, taper: int, dtype) -> Float[Array, " m"]:
+    """Raised-cosine ramps of ``taper`` samples at both ends of a segment of length m."""
+    i = jnp.arange(m, dtype=dtype)
+    if taper <= 0:
+        return jnp.ones(m, dtype)
+    t = jnp.minimum(i + 1, m - i) / (taper + 1)
+    return jnp.where(t < 1, 0.5 - 0.5 * jnp.cos(jnp.pi * jnp.clip(t, 0, 1)), 1.0).astype(dtype)
+
+
+def centre_and_taper(segments: Float[Array, "s m"], taper: int) -> Float[Array, "s m"]:
+    """X = t ⊙ (x − μ_t) with μ_t the t-weighted mean: zero mean and zero at both ends.
+
+    The zero ends remove the step that zero padding would otherwise put at the borders
+    (whose derivative is the trivial, perfectly "kurtotic" border-spike solution of MED);
+    the weighted mean keeps every segment exactly centred, so the full convolution
+    B = W ∗ X is centred too and eq. (22) is the exact stationarity condition.
+    """
+    t = taper_window(segments.shape[-1], taper, segments.dtype)
+    mu = segments @ t / jnp.sum(t)
+    return t * (segments - mu[:, None])
+
+
+class Problem(eqx.Module):
+    """Per-frame precomputation for the MED iteration (eqs. (22)–(24) in Fourier form)."""
+
+    Z: Complex[Array, "p n"]  # FFT of the packed segments x_a + i x_b, length n
+    Xa: Complex[Array, "p f"]  # half-spectrum of the even segments
+    Xb: Complex[Array, "p f"]  # half-spectrum of the odd segments
+    Pa: Float[Array, "p f"]  # |Xa|², summed (weighted) into the autocorrelation of R
+    Pb: Float[Array, "p f"]
+    m: int = eqx.field(static=True)  # samples per segment
+    s: int = eqx.field(static=True)  # real segments (a zero one pads an odd count)
+    L: int = eqx.field(static=True)  # filter length
+    n: int = eqx.field(static=True)  # FFT length, 5-smooth, ≥ m + L − 1
+
+
+def prepare(X: Float[Array, "s m"], L: int) -> Problem:
+    """FFTs of the centred, tapered segments; done once per frame."""
+    s, m = X.shape
+    n = fft_length(m + L - 1)
+    if s % 2:
+        X = jnp.concatenate([X, jnp.zeros((1, m), X.dtype)])
+    Z = jnp.fft.fft(X[0::2] + 1j * X[1::2], n=n, axis=-1)
+    Xa, Xb = _split(Z, n)
+    return Problem(Z, Xa, Xb, _abs2(Xa), _abs2(Xb), m, s, L, n)
+
+
+def _abs2(z):
+    return z.real * z.real + z.imag * z.imag
+
+
+def _split(Z, n):
+    """Half-spectra (f = 0..n/2) of the two real signals packed in Z."""
+    f = jnp.arange(n // 2 + 1)
+    zf = Z[:, f]
+    zr = jnp.conj(Z[:, (-f) % n])
+    return 0.5 * (zf + zr), -0.5j * (zf - zr)
+
+
+def _segment_sums(B, L, m):
+    """Centred output and per-segment energy U (eq. (23)) and 4th power sums."""
+    B = B[:, : m + L - 1]
+    b = B - jnp.mean(B, axis=-1, keepdims=True)
+    ba, bb = b.real, b.imag
+    ba2, bb2 = ba * ba, bb * bb
+    U = jnp.concatenate([jnp.sum(ba2, -1), jnp.sum(bb2, -1)])
+    F = jnp.concatenate([jnp.sum(ba2 * ba2, -1), jnp.sum(bb2 * bb2, -1)])
+    return ba, bb, U, F
+
+
+class Stats(eqx.Module):
+    """Column statistics of B = W ∗ X for the current filter."""
+
+    ratio_sum: Float[Array, ""]  # Σ_j k_j, k_j = Σ(B−μ)⁴ / U_j²  (eq. (24))
+    excess: Float[Array, ""]  # mean sample excess kurtosis over non-constant segments
+    w: Float[Array, " s2"]  # R weights k_j / U_j (eq. (22), left)
+    v: Float[Array, " s2"]  # b weights 1 / U_j² (eq. (22), right)
+    ba: Float[Array, "p mf"]
+    bb: Float[Array, "p mf"]
+
+
+def filter_spectrum(W: Float[Array, " L"], n: int) -> Complex[Array, " n"]:
+    return jnp.fft.fft(W, n=n)
+
+
+def stats(W: Float[Array, " L"], pb: Problem) -> Stats:
+    """Output B (one inverse FFT for two segments) and the weights of eq. (22)."""
+    B = jnp.fft.ifft(pb.Z * filter_spectrum(W, pb.n), axis=-1)
+    ba, bb, U, F = _segment_sums(B, pb.L, pb.m)
+    # Constant segments (zero variance: a padded segment, a black or clipped column) carry
+    # no kurtosis; give them zero weight instead of 0/0.
+    ok = U > jnp.finfo(U.dtype).eps * jnp.max(U)
+    Us = jnp.where(ok, U, 1.0)
+    k = jnp.where(ok, F / (Us * Us), 0.0)
+    n_ok = jnp.maximum(jnp.sum(ok), 1)
+    excess = jnp.sum(jnp.where(ok, (pb.m + pb.L - 1) * k - 3.0, 0.0)) / n_ok
+    return Stats(
+        jnp.sum(k), excess, jnp.where(ok, k / Us, 0.0), jnp.where(ok, 1 / (Us * Us), 0.0), ba, bb
+    )
+
+
+def weighted_autocorrelation(w: Float[Array, " s2"], pb: Problem) -> Float[Array, " n"]:
+    """r(τ) = Σ_j w_j Σ_i X_ij X_{i+τ,j} for all circular lags (n ≥ m + L − 1: no wrap)."""
+    p = pb.Pa.shape[0]
+    P = w[:p] @ pb.Pa + w[p:] @ pb.Pb
+    return jnp.fft.irfft(P, n=pb.n)
+
+
+def update(W: Float[Array, " L"], pb: Problem, loading: float) -> tuple[Array, Stats]:
+    """One fixed-point step W ← R⁻¹b / ‖R⁻¹b‖ (eqs. (22)–(24), correction 5).
+
+    R_kl = Σ_j (k_j/U_j) Σ_i X_{i−l,j} X_{i−k,j}  (Toeplitz: weighted autocorrelation)
+    b_k  = Σ_j U_j⁻² Σ_i (B_ij − μ_j)³ X_{i−k,j}  (weighted cross-correlation)
+    Both are sums over segments of correlations, accumulated in the frequency domain and
+    brought back with one short inverse FFT each. ``loading`` adds loading·R_00 to the
+    diagonal before the Cholesky factorisation.
+    """
+    st = stats(W, pb)
+    L, n = pb.L, pb.n
+    Cz = st.ba * st.ba * st.ba + 1j * (st.bb * st.bb * st.bb)
+    Ca, Cb = _split(jnp.fft.fft(Cz, n=n, axis=-1), n)
+    p = pb.Xa.shape[0]
+    G = st.v[:p] @ (jnp.conj(pb.Xa) * Ca) + st.v[p:] @ (jnp.conj(pb.Xb) * Cb)
+    bvec = jnp.fft.irfft(G, n=n)[:L]
+    r = weighted_autocorrelation(st.w, pb)[:L]
+    idx = jnp.abs(jnp.arange(L)[:, None] - jnp.arange(L)[None, :])
+    R = r[idx] + (loading * r[0]) * jnp.eye(L, dtype=r.dtype)
+    x = jsl.cho_solve(jsl.cho_factor(R, lower=True), bvec)
+    return x / jnp.linalg.norm(x), st
+
+
+def peak_delay(W: Float[Array, " L"], w: Float[Array, " s2"], pb: Problem):
+    """Sub-pixel delay and sign of the filter from the cross-correlation of B with X.
+
+    c(τ) = Σ_j w_j Σ_i B_{i+τ,j} X_ij = Σ_k W_k r(τ − k), evaluated on its band-limited
+    (trigonometric) interpolant: the integer peak of |c| over τ ∈ [0, L), then Newton steps
+    on c'(τ) = 0. For a filter that is a pure (fractional) delay d, c is the symmetric
+    autocorrelation centred at d, so its interpolant peaks exactly at d (no parabola bias).
+    """
+    n, L = pb.n, pb.L
+    p = pb.Pa.shape[0]
+    P = w[:p] @ pb.Pa + w[p:] @ pb.Pb
+    C = jnp.fft.rfft(W, n=n) * P
+    c = jnp.fft.irfft(C, n=n)
+    # Lags −L+1..L−1 are possible for the correlation, but a causal filter delays: τ ≥ 0.
+    k = jnp.argmax(jnp.abs(c[:L]))
+    sign = jnp.where(c[k] < 0, -1.0, 1.0).astype(W.dtype)
+    f = jnp.arange(n // 2 + 1, dtype=W.dtype)
+    omega = 2 * jnp.pi * f / n
+    a = jnp.where((f == 0) | (2 * f == n), 1.0, 2.0) / n
+    Cs = C * sign
+
+    def derivs(t):
+        e = Cs * jnp.exp(1j * omega * t)
+        d1 = jnp.sum(a * (1j * omega * e).real)
+        d2 = jnp.sum(a * (-(omega**2) * e).real)
+        return d1, d2
+
+    def newton(t, _):
+        d1, d2 = derivs(t)
+        step = jnp.where(d2 < 0, -d1 / jnp.where(d2 < 0, d2, -1.0), 0.0)
+        return t + jnp.clip(step, -0.5, 0.5), None
+
+    t0 = k.astype(W.dtype)
+    t, _ = jax.lax.scan(newton, t0, None, length=4)
+    t = jnp.clip(t, t0 - 1, t0 + 1)
+    return t, sign
+
+
+def shifted_output(W: Float[Array, " L"], delay, pb: Problem) -> Float[Array, "s m"]:
+    """B(i + delay) for i = 0..m−1: the filter output moved back onto the input rows.
+
+    The shift is applied in the Fourier domain (e^{iωd}, Nyquist bin made real so the
+    shift filter stays real and the two-segment packing stays exact).
+    """
+    n = pb.n
+    fs = jnp.fft.fftfreq(n).astype(W.dtype)
+    phase = jnp.exp(2j * jnp.pi * fs * delay)
+    if n % 2 == 0:
+        phase = phase.at[n // 2].set(jnp.cos(jnp.pi * delay))
+    B = jnp.fft.ifft(pb.Z * (filter_spectrum(W, n) * phase), axis=-1)[:, : pb.m]
+    out = jnp.stack([B.real, B.imag], axis=1).reshape(-1, pb.m)
+    return out[: pb.s]

@@ -1,0 +1,173 @@
+"""The cross structured-light sensor: camera + two laser planes + camera-to-robot transform.
+
+Plane i is `a x + b y + c z + 1 = 0` in the camera frame, mm (eq. (1)). Triangulation
+follows DESIGN.md correction 3 (the paper's eq. (27) drops the depth): for the unit ray r
+of an undistorted pixel, the camera-frame point is X_c = −r / (n·r) with n = (a, b, c),
+and the robot-frame point is X_r = R_cr X_c + T_cr.
+
+The calibration file is the JSON of DESIGN.md (Contracts): `image_size` [w, h], `K` 3×3,
+`dist` [k1, k2, p1, p2], `rms_px`, `planes` [[a1,b1,c1],[a2,b2,c2]], `R_cr` 3×3,
+`T_cr` [3], plus optional extras that are kept verbatim.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from .camera import Camera, pixel_to_ray
+
+__all__ = [
+    "CalibrationError",
+    "Sensor",
+    "cross_projector_planes",
+    "default_mount",
+    "default_sensor",
+    "triangulate",
+    "plane_angle_deg",
+]
+
+#: Table 4 of the paper with v0 corrected (DESIGN.md, correction 2).
+TABLE4_K = ((922.435, 0.0, 329.168), (0.0, 917.356, 270.566), (0.0, 0.0, 1.0))
+TABLE4_DIST = (-0.291459, 0.157027, -1.354e-4, -2.682e-4)
+
+
+class CalibrationError(ValueError):
+    """A calibration file or calibration input that cannot be used, with the reason."""
+
+
+class Sensor(eqx.Module):
+    """Camera, both laser planes and the camera-to-robot rigid transform.
+
+    Attributes:
+        camera: intrinsics and distortion.
+        planes: (2, 3) plane coefficients (a, b, c): plane 0 makes the horizontal stripe
+            (one centre per image column), plane 1 the vertical stripe (one per row).
+        R_cr: (3, 3) rotation camera → robot.
+        T_cr: (3,) translation camera → robot, mm.
+    """
+
+    camera: Camera
+    planes: Float[Array, "2 3"]
+    R_cr: Float[Array, "3 3"]
+    T_cr: Float[Array, 3]
+
+    def to_robot(self, X_c: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
+        """Camera-frame points → robot frame: X_r = R_cr X_c + T_cr."""
+        return X_c @ self.R_cr.T + self.T_cr
+
+    def triangulate(
+        self, uv: Float[Array, "*b 2"], plane: int, *, robot_frame: bool = False
+    ) -> Float[Array, "*b 3"]:
+        """See `triangulate`."""
+        return triangulate(self, uv, plane, robot_frame=robot_frame)
+
+
+def triangulate(
+    sensor: Sensor, uv: Float[Array, "*b 2"], plane: int, *, robot_frame: bool = False
+) -> Float[Array, "*b 3"]:
+    """Intersect the viewing rays of pixels with a laser plane (correction 3 of eq. (27)).
+
+    Args:
+        sensor: the calibrated sensor.
+        uv: distorted pixel coordinates (OpenCV convention); NaN propagates.
+        plane: 0 for the horizontal stripe's plane, 1 for the vertical stripe's.
+        robot_frame: return X_r = R_cr X_c + T_cr instead of the camera-frame point.
+
+    Returns:
+        3-D points in mm. A ray parallel to the plane gives a non-finite value.
+    """
+    ray = pixel_to_ray(uv, sensor.camera, normalize=False)
+    n = sensor.planes[plane].astype(ray.dtype)
+    denom = ray @ n
+    safe = jnp.where(denom == 0, jnp.ones_like(denom), denom)
+    X_c = jnp.where((denom == 0)[..., None], jnp.nan, -ray / safe[..., None])
+    return sensor.to_robot(X_c) if robot_frame else X_c
+
+
+def plane_angle_deg(n1: ArrayLike, n2: ArrayLike) -> float:
+    """Angle between two planes' normals in degrees, in [0, 90]."""
+    n1 = np.asarray(n1, float)
+    n2 = np.asarray(n2, float)
+    c = abs(n1 @ n2) / (np.linalg.norm(n1) * np.linalg.norm(n2))
+    return math.degrees(math.acos(min(1.0, c)))
+
+
+def cross_projector_planes(
+    origin: ArrayLike, target: ArrayLike, roll_deg: float = 0.0
+) -> np.ndarray:
+    """Planes (a, b, c) of an orthogonal cross projector, camera frame.
+
+    The projector sits at `origin` (mm, camera frame) and aims its axis d at `target`. Its
+    two sheets both contain d and are mutually orthogonal: sheet 0 spans d and e_x (the
+    camera x axis made orthogonal to d, rotated by `roll_deg` about d) and therefore draws
+    the horizontal stripe; sheet 1 spans d and e_y = d × e_x and draws the vertical stripe.
+    Neither plane may pass through the camera centre (the a x + b y + c z + 1 = 0 form cannot
+    hold such a plane), which needs an origin off both sheets through the camera axis.
+    """
+    P = np.asarray(origin, float)
+    d = np.asarray(target, float) - P
+    d /= np.linalg.norm(d)
+    ex = np.array([1.0, 0.0, 0.0]) - d[0] * d
+    ex /= np.linalg.norm(ex)
+    ey = np.cross(d, ex)
+    th = math.radians(roll_deg)
+    ex, ey = math.cos(th) * ex + math.sin(th) * ey, -math.sin(th) * ex + math.cos(th) * ey
+    planes = []
+    for n in (ey, ex):  # sheet 0 contains ex, so its normal is ey; sheet 1 the reverse
+        offset = n @ P
+        if abs(offset) < 1e-9:
+            raise CalibrationError("a laser plane passes through the camera centre")
+        planes.append(-n / offset)
+    return np.stack(planes)
+
+
+def default_mount(
+    standoff_mm: float = 230.0, ahead_mm: float = 150.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-robot transform of the default rig: the camera looks straight at the wall.
+
+    Robot frame (DESIGN.md): x_r forward, y_r left, z_r out of the wall. The camera's image
+    u axis points to the robot's right (x_c = −y_r), v axis backwards (y_c = −x_r) and its
+    optical axis into the wall (z_c = −z_r), so the horizontal stripe crosses a weld that
+    runs along the direction of travel. The optical centre is `standoff_mm` above the wall
+    and `ahead_mm` ahead of the robot's reference point.
+    """
+    R_cr = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    T_cr = np.array([ahead_mm, 0.0, standoff_mm])
+    return R_cr, T_cr
+
+
+def default_sensor(dtype=None) -> Sensor:
+    """The rendered rig: Table 4's intrinsics (correction 2) and an orthogonal cross projector.
+
+    Table 4's printed planes are 81° apart, not 89.998° (correction 2), so the renderer gets
+    its own projector: 60 mm off the optical axis along −x and −y of the camera (a baseline
+    of 85 mm) and aimed at the wall 230 mm away (the stand-off of the paper's Table 5), which
+    gives a ≈ 15–25° triangulation angle for each sheet.
+
+    The projector aims 40 mm to the side of the optical axis (x_c = +40 mm, the robot's
+    right): the horizontal stripe still crosses the followed weld in the middle of the image,
+    while the vertical stripe runs beside that weld on bare plate, so a crossing weld ahead
+    shows on it as a bead with plate on both sides (a T-junction is then unambiguous; with
+    the cross centred on the weld the vertical stripe would lie along the bead's crown).
+    """
+    R_cr, T_cr = default_mount()
+    planes = cross_projector_planes(origin=(-60.0, -60.0, 0.0), target=(40.0, 0.0, 230.0))
+    return sensor_from_arrays(TABLE4_K, TABLE4_DIST, planes, R_cr, T_cr, (640, 480), dtype=dtype)
+
+
+def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None) -> Sensor:
+    """Build a `Sensor` from plain arrays (no validation; see `load_sensor` for that)."""
+    dtype = dtype or jnp.asarray(0.0).dtype
+    camera = Camera.from_matrix(jnp.asarray(K, dtype), jnp.asarray(dist, dtype), image_size)
+    return Sensor(
+        camera=camera,
+        planes=jnp.asarray(planes, dtype),
+        R_cr=jnp.asarray(R_cr, dtype),
+        T_cr=jnp.asarray(T_cr, dtype),
+    )

@@ -1,0 +1,184 @@
+"""Path controller in a pure-Python kinematic closed loop (exact unicycle integration)."""
+
+import math
+
+import pytest
+
+from cslx.runtime.controller import ControllerConfig, PathController, State, wheel_speeds
+
+STRIPE_X = 150.0  # the horizontal stripe's x_r in the default rig
+STRIPE_HALF = 80.0  # its half-length on the wall, mm
+VERTICAL_X = (90.0, 210.0)  # x_r range seen by the vertical stripe
+
+
+def integrate(pose, v, w, dt):
+    x, y, th = pose
+    if abs(w) < 1e-12:
+        return x + v * dt * math.cos(th), y + v * dt * math.sin(th), th
+    r = v / w
+    th2 = th + w * dt
+    return x + r * (math.sin(th2) - math.sin(th)), y - r * (math.cos(th2) - math.cos(th)), th2
+
+
+def to_robot(pose, p):
+    x, y, th = pose
+    dx, dy = p[0] - x, p[1] - y
+    return dx * math.cos(th) + dy * math.sin(th), -dx * math.sin(th) + dy * math.cos(th)
+
+
+def _intersect_segment_with_line(a, b, x_const=None, y_const=None):
+    """Point of segment a→b (robot frame) where x = x_const or y = y_const, or None."""
+    (ax, ay), (bx, by) = a, b
+    if x_const is not None:
+        if (ax - x_const) * (bx - x_const) > 0 or ax == bx:
+            return None
+        s = (x_const - ax) / (bx - ax)
+    else:
+        if (ay - y_const) * (by - y_const) > 0 or ay == by:
+            return None
+        s = (y_const - ay) / (by - ay)
+    return ax + s * (bx - ax), ay + s * (by - ay)
+
+
+def observe(pose, welds):
+    """What an ideal cross sensor reports for weld centre-line segments (world, mm)."""
+    obs = dict(
+        offset_mm=math.nan,
+        heading_deg=math.nan,
+        confidence=0.0,
+        junction=False,
+        junction_x_mm=math.nan,
+    )
+    best = None
+    for a, b in welds:
+        ra, rb = to_robot(pose, a), to_robot(pose, b)
+        p = _intersect_segment_with_line(ra, rb, x_const=STRIPE_X)
+        if (
+            p is not None
+            and abs(p[1]) <= STRIPE_HALF
+            and (best is None or abs(p[1]) < abs(best[0]))
+        ):
+            hd = math.degrees(math.atan2(rb[1] - ra[1], rb[0] - ra[0]))
+            hd = (hd + 90.0) % 180.0 - 90.0  # direction of the line, not of the segment
+            best = (p[1], hd)
+        q = _intersect_segment_with_line(ra, rb, y_const=0.0)
+        crossing = abs(math.atan2(rb[1] - ra[1], rb[0] - ra[0])) % math.pi
+        steep = 0.25 * math.pi < crossing < 0.75 * math.pi
+        if q is not None and steep and VERTICAL_X[0] <= q[0] <= VERTICAL_X[1]:
+            obs.update(junction=True, junction_x_mm=q[0])
+    if best is not None:
+        obs.update(offset_mm=best[0], heading_deg=best[1], confidence=0.9)
+    return obs
+
+
+def run_loop(
+    ctrl, pose, welds, steps, dt=0.05, use_heading=True, measured_heading=False, confidence=None
+):
+    trail, cmds = [pose], []
+    for _ in range(steps):
+        obs = observe(pose, welds)
+        if not use_heading:
+            obs["heading_deg"] = math.nan
+        if confidence is not None:
+            obs["confidence"] = confidence
+        cmd = ctrl.update(dt, **obs, robot_heading_rad=pose[2] if measured_heading else None)
+        cmds.append(cmd)
+        pose = integrate(pose, cmd.v_mm_s, cmd.omega_rad_s, dt)
+        trail.append(pose)
+    return trail, cmds
+
+
+STRAIGHT = [((-1000.0, 0.0), (5000.0, 0.0))]
+
+
+@pytest.mark.parametrize("use_heading", [True, False])
+@pytest.mark.parametrize("start", [(0.0, -20.0, math.radians(10)), (0.0, 35.0, math.radians(-15))])
+def test_converges_to_straight_weld(start, use_heading):
+    ctrl = PathController()
+    trail, cmds = run_loop(ctrl, start, STRAIGHT, steps=800, use_heading=use_heading)
+    x, y, th = trail[-1]
+    assert abs(y) < 0.5 and abs(math.degrees(th)) < 0.5, trail[-1]
+    assert x > 900.0  # it kept driving at ~30 mm/s
+    overshoot = max(abs(p[1]) for p in trail[200:])
+    assert overshoot < abs(start[1])
+
+
+def test_limits_respected():
+    c = ControllerConfig(
+        v_nominal=70.0, v_max=60.0, omega_max=0.3, accel_max=40.0, alpha_max=0.8, wheel_max=65.0
+    )
+    ctrl = PathController(c)
+    dt = 0.05
+    _, cmds = run_loop(ctrl, (0.0, 40.0, math.radians(-20)), STRAIGHT, steps=400, dt=dt)
+    prev_v = prev_w = 0.0
+    for cmd in cmds:
+        assert abs(cmd.v_mm_s) <= c.v_max + 1e-9
+        assert abs(cmd.omega_rad_s) <= c.omega_max + 1e-9
+        assert abs(cmd.v_mm_s - prev_v) <= c.accel_max * dt + 1e-9
+        assert abs(cmd.omega_rad_s - prev_w) <= c.alpha_max * dt + 1e-9
+        assert max(abs(cmd.left_mm_s), abs(cmd.right_mm_s)) <= c.wheel_max + 1e-9
+        assert (cmd.left_mm_s, cmd.right_mm_s) == pytest.approx(
+            wheel_speeds(cmd.v_mm_s, cmd.omega_rad_s, c.track_mm)
+        )
+        prev_v, prev_w = cmd.v_mm_s, cmd.omega_rad_s
+    assert cmds[-1].v_mm_s == pytest.approx(c.v_max)  # converged: straight at v_max
+
+
+def test_confidence_slowdown_and_stop():
+    c = ControllerConfig()
+    half = c.min_confidence + 0.5 * (c.full_confidence - c.min_confidence)
+    _, cmds = run_loop(PathController(c), (0.0, 0.0, 0.0), STRAIGHT, 200, confidence=half)
+    assert cmds[-1].v_mm_s == pytest.approx(0.5 * c.v_nominal, rel=1e-6)
+    _, cmds = run_loop(PathController(c), (0.0, 0.0, 0.0), STRAIGHT, 200, confidence=0.05)
+    assert all(cmd.v_mm_s == 0.0 and cmd.omega_rad_s == 0.0 for cmd in cmds)
+
+
+def test_lost_weld_brakes_to_rest():
+    ctrl = PathController()
+    run_loop(ctrl, (0.0, 0.0, 0.0), STRAIGHT, 100)
+    assert ctrl.v == pytest.approx(30.0)
+    cmds = [ctrl.update(0.05, math.nan) for _ in range(40)]
+    assert cmds[-1].v_mm_s == 0.0
+    assert all(b.v_mm_s <= a.v_mm_s for a, b in zip(cmds, cmds[1:], strict=False))
+
+
+T_JUNCTION = [((-1000.0, 0.0), (600.0, 0.0)), ((600.0, -2000.0), (600.0, 2000.0))]
+
+
+@pytest.mark.parametrize("direction", [+1, -1])
+@pytest.mark.parametrize("measured", [False, True])
+def test_t_junction_turn_and_follow_new_weld(direction, measured):
+    ctrl = PathController(ControllerConfig(turn_direction=direction))
+    trail, cmds = run_loop(
+        ctrl, (0.0, 8.0, math.radians(-3)), T_JUNCTION, 1200, measured_heading=measured
+    )
+    states = [cmds[0].state]
+    for cmd in cmds[1:]:
+        if cmd.state != states[-1]:
+            states.append(cmd.state)
+    assert states == [State.FOLLOW, State.APPROACH_JUNCTION, State.TURN, State.FOLLOW]
+    i_turn = next(i for i, c in enumerate(cmds) if c.state is State.TURN)
+    x_turn = trail[i_turn][0]
+    assert abs(x_turn - 600.0) < 3.0  # turned on the crossing weld
+    x, y, th = trail[-1]
+    assert math.degrees(th) == pytest.approx(90.0 * direction, abs=1.0)
+    assert abs(x - 600.0) < 1.0  # following the crossing weld
+    assert direction * y > 300.0  # and travelling along it
+    assert ctrl.turns_completed == 1
+
+
+def test_arc_turn():
+    ctrl = PathController(ControllerConfig(turn_radius_mm=100.0))
+    trail, cmds = run_loop(ctrl, (0.0, 0.0, 0.0), T_JUNCTION, 1200)
+    turning = [c for c in cmds if c.state is State.TURN]
+    # an arc: driving forward through most of the turn (ramps at its ends)
+    assert sum(c.v_mm_s > 5.0 for c in turning) > 0.8 * len(turning)
+    x, y, th = trail[-1]
+    assert math.degrees(th) == pytest.approx(90.0, abs=1.0) and abs(x - 600.0) < 1.0
+
+
+def test_bad_config_and_dt():
+    with pytest.raises(ValueError, match="turn_direction"):
+        ControllerConfig(turn_direction=0)
+    with pytest.raises(ValueError, match="dt"):
+        PathController().update(0.0, 1.0)

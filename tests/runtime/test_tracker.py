@@ -1,0 +1,120 @@
+"""Tracker on rendered frames vs `true_weld_line`; bad frames; the Kalman model; closed loop."""
+
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+from cslx.runtime.tracker import KalmanConfig, Tracker, _WeldLineFilter
+from cslx.sensor import default_sensor
+from cslx.sim import random_pose, random_world, render_frame
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def tracker():
+    lines = []
+    tr = Tracker.from_calibration(default_sensor(), log=lines.append)
+    tr.lines = lines
+    return tr
+
+
+@pytest.fixture(scope="module")
+def frames():
+    sensor = default_sensor()
+    out = []
+    for i, kind in enumerate(("straight", "cross", "cross")):
+        rng = np.random.default_rng([41, i])
+        world = random_world(kind, rng)
+        pose = random_pose(world, kind, rng, sensor)
+        img, gt = render_frame(sensor, world, pose, "clean", seed=i)
+        out.append((kind, img, gt))
+    return out
+
+
+def test_compile_logged(tracker):
+    assert tracker.compile_s > 0
+    assert any("compiled" in line for line in tracker.lines)
+
+
+def test_offset_and_junction_on_rendered_frames(tracker, frames):
+    for kind, img, gt in frames:
+        tracker.reset()
+        first = tracker.step(img)
+        # a still robot sees the same frame again (odometry 0): the junction is confirmed
+        second = tracker.step(img, odometry=0.0)
+        for obs in (first, second):
+            assert obs.status == "ok"
+            assert abs(obs.offset_mm - gt["offset_mm"]) < 1.0, (
+                kind,
+                obs.offset_mm,
+                gt["offset_mm"],
+            )
+            assert abs(obs.bead_width_mm - gt["bead_width_mm"]) < 3.0
+            assert 0.0 < obs.confidence <= 1.0
+        assert not first.junction  # one sighting is not enough
+        if kind == "cross":
+            assert second.junction
+            assert abs(second.junction_x_mm - gt["junction_x_mm"]) < 3.0
+        else:
+            assert not second.junction and math.isnan(second.junction_x_mm)
+
+
+def test_bad_frames_give_zero_confidence(tracker, frames):
+    tracker.reset()
+    good = frames[0][1]
+    tracker.step(good)
+    rng = np.random.default_rng(0)
+    bad = {
+        "no frame": None,
+        "wrong frame shape": good[:240],
+        "wrong frame dtype": good.astype(np.float32),
+        "black frame": np.zeros_like(good),
+        "saturated frame": np.full_like(good, 255),
+        "no stripe found": rng.integers(0, 40, good.shape, dtype=np.uint8),
+        "not an image": "frame.png",
+    }
+    for why, frame in bad.items():
+        n_lines = len(tracker.lines)
+        obs = tracker.step(frame)
+        assert obs.status.startswith(why), (why, obs.status)
+        assert obs.confidence == 0.0 and math.isnan(obs.offset_mm)
+        assert len(tracker.lines) == n_lines + 1 and why in tracker.lines[-1]
+    assert tracker.step(good).status == "ok"  # and it recovers
+
+
+def test_kalman_recovers_heading_from_odometry():
+    """Bead centres along a line at 3° seen while driving 1.5 mm/frame: heading → 3°."""
+    rng = np.random.default_rng(1)
+    x_ref, theta, e0 = 150.0, math.radians(3.0), 2.0
+    kf = _WeldLineFilter(KalmanConfig(), x_ref)
+    travelled = 0.0
+    for k in range(80):
+        if k:
+            kf.predict(1.5, 0.0)
+            travelled += 1.5
+        true_e = e0 + math.tan(theta) * travelled
+        kf.update(x_ref + rng.normal(0, 0.3), true_e + rng.normal(0, 0.2), 0.5)
+    assert math.degrees(kf.x[1]) == pytest.approx(3.0, abs=0.5)
+    assert kf.x[0] == pytest.approx(e0 + math.tan(theta) * travelled, abs=0.3)
+    # a rotation of the robot by δ moves the line by −x_ref δ and turns it by −δ
+    before = kf.x.copy()
+    kf.predict(0.0, math.radians(1.0))
+    assert kf.x[0] == pytest.approx(before[0] - x_ref * math.radians(1.0))
+    assert kf.x[1] == pytest.approx(before[1] - math.radians(1.0))
+
+
+def test_closed_loop_short(tracker):
+    from cslx.sim.closed_loop import run_closed_loop
+
+    res = run_closed_loop(
+        n_frames=30, seed=3, tracker=tracker, start_offset_mm=3.0, start_heading_deg=0.0
+    )
+    assert res["n_counted"] >= 25
+    # starts 3 mm off: the controller reduces it while the tracker stays within ~1 mm
+    assert res["mean_error_mm"] < 3.0 and res["max_error_mm"] < 4.0
+    assert res["mean_abs_estimation_error_mm"] < 1.0
+    errs = [r["tracking_error_mm"] for r in res["rows"]]
+    assert np.mean(errs[-5:]) < np.mean(errs[:5])

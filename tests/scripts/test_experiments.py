@@ -1,0 +1,78 @@
+"""Smoke runs of the experiment scripts (Table 6 at --quick, one figure), < 60 s in all.
+
+They check that the scripts run end to end and write well-formed outputs whose numbers are
+consistent with the library's own metric (`cslx.segmentation.stripe_errors`), not the numbers
+themselves (those are the experiments' results).
+"""
+
+import csv
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+EXPERIMENTS = pathlib.Path(__file__).resolve().parents[2] / "experiments"
+
+
+def test_point_errors_match_stripe_errors():
+    """The pooled per-point errors of the experiments equal `stripe_errors` on one frame."""
+    from cslx.segmentation import stripe_errors
+    from cslx.sensor import default_sensor
+    from experiments import common as C
+
+    sensor = default_sensor()
+    image, gt = C.frame_at("straight", "glare", 5, 1, sensor)  # the frame of the next test
+    for stripe in ("h", "v"):
+        uv = C.centres_for(image, "cm", C.SPACES["r-g"], stripe)
+        uv[::7] = np.nan  # some misses, so the matched subset matters
+        ref = stripe_errors(uv, gt[C.STRIPE_GT[stripe]], sensor, C.STRIPE_PLANE[stripe])
+        pool = C.Pool()
+        pool.add(*C.point_errors(uv, gt[C.STRIPE_GT[stripe]], sensor, C.STRIPE_PLANE[stripe]))
+        s = pool.summary()
+        assert s["n_matched"] == ref["n_matched"] and s["n_gt"] == ref["n_gt"]
+        for k in ("mean_mm", "median_mm", "p95_mm", "mean_px"):
+            assert s[k] == pytest.approx(ref[k], rel=1e-6, abs=1e-9), k
+        assert s["gross_outliers"] == ref["gross_outliers"]
+
+
+def test_frame_at_matches_render_dataset():
+    """`frame_at` reproduces frame i of `render_dataset` without rendering the others."""
+    from cslx import sim as synth
+    from experiments import common as C
+
+    images, gt, _ = synth.render_dataset("straight", "glare", 2, seed=5)
+    image, g1 = C.frame_at("straight", "glare", 5, 1)
+    np.testing.assert_array_equal(image, images[1])
+    np.testing.assert_array_equal(g1["h_v"], gt["h_v"][1])
+
+
+def test_table6_quick(tmp_path):
+    from experiments import table6_segmentation as T
+
+    rows = T.main(quick=True, out=str(tmp_path))
+    with open(tmp_path / "table6_segmentation.csv", encoding="utf-8") as f:
+        csv_rows = list(csv.DictReader(f))
+    assert len(csv_rows) == len(rows)
+    pooled = [r for r in rows if r["condition"] == "all"]
+    # Every paper row is present, for both stripes and both spaces.
+    assert {(r["stripe"], r["space"], r["method"]) for r in pooled} >= set(T.PAPER)
+    for r in pooled:
+        assert r["time_calls"] >= 1 and r["time_ms"] > 0
+        assert 0.0 <= r["detection_rate"] <= 1.0
+        if r["n_matched"]:
+            assert r["median_mm"] <= r["p95_mm"] + 1e-12
+            assert math.isfinite(r["mean_mm"])
+    md = (tmp_path / "table6_segmentation.md").read_text(encoding="utf-8")
+    assert "Claim (i)" in md and "Claim (ii)" in md and "git" in md
+
+
+def test_fig07_writes_png(tmp_path):
+    from experiments import fig07_colour_spaces as F
+
+    rows = F.main(out=str(tmp_path))
+    assert (tmp_path / "fig07_colour_spaces.png").stat().st_size > 10_000
+    by = {r["space"]: r for r in rows}
+    # Kurtosis is the search's criterion: its pick scores at least as high as R, gray, R−G.
+    pick = next(v for k, v in by.items() if k.startswith("kurtosis pick"))
+    assert pick["kurtosis"] >= max(by[k]["kurtosis"] for k in ("R", "gray", "R−G")) - 1e-3

@@ -1,0 +1,123 @@
+"""Sensor geometry, triangulation (correction 3) and the calibration JSON contract."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cslx.sensor import (
+    CalibrationError,
+    cross_projector_planes,
+    default_sensor,
+    load_sensor,
+    plane_angle_deg,
+    save_sensor,
+    sensor_to_dict,
+    triangulate,
+)
+from cslx.sensor.camera import project
+
+
+def test_default_rig_is_orthogonal_and_proper():
+    s = default_sensor()
+    assert plane_angle_deg(s.planes[0], s.planes[1]) == pytest.approx(90.0, abs=1e-9)
+    R = np.asarray(s.R_cr)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("plane", [0, 1])
+def test_triangulate_inverts_projection(plane):
+    s = default_sensor()
+    n = np.asarray(s.planes[plane])
+    rng = np.random.default_rng(0)
+    # Random points on the plane, in front of the camera.
+    z = rng.uniform(180, 300, 200)
+    x = rng.uniform(-60, 60, 200)
+    if abs(n[1]) > abs(n[0]):
+        y = -(n[0] * x + n[2] * z + 1) / n[1]
+        X = np.stack([x, y, z], -1)
+    else:
+        y = x
+        x = -(n[1] * y + n[2] * z + 1) / n[0]
+        X = np.stack([x, y, z], -1)
+    uv = project(jnp.asarray(X), s.camera)
+    got = triangulate(s, uv, plane)
+    np.testing.assert_allclose(np.asarray(got), X, atol=1e-7)
+    X_r = triangulate(s, uv, plane, robot_frame=True)
+    np.testing.assert_allclose(
+        np.asarray(X_r), X @ np.asarray(s.R_cr).T + np.asarray(s.T_cr), atol=1e-7
+    )
+
+
+def test_triangulate_jit_vmap_grad():
+    s = default_sensor()
+    uv = jnp.array([[100.0, 200.0], [320.0, 250.0], [500.0, 260.0]])
+    plain = triangulate(s, uv, 0)
+    jitted = jax.jit(triangulate, static_argnums=2)(s, uv, 0)
+    vm = jax.vmap(lambda p: triangulate(s, p, 0))(uv)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(plain), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(vm), np.asarray(plain), atol=1e-10)
+    g = jax.grad(lambda p: triangulate(s, p, 0)[..., 2].sum())(uv)
+    assert np.all(np.isfinite(np.asarray(g)))
+    nan = triangulate(s, jnp.array([[jnp.nan, 3.0]]), 0)
+    assert np.all(np.isnan(np.asarray(nan)))
+
+
+def test_cross_projector_through_centre_rejected():
+    with pytest.raises(CalibrationError, match="camera centre"):
+        cross_projector_planes(origin=(0.0, 0.0, 0.0), target=(0.0, 0.0, 200.0))
+
+
+def test_json_round_trip(tmp_path):
+    s = default_sensor()
+    path = tmp_path / "sensor.json"
+    save_sensor(s, path, rms_px=0.12, note="test")
+    data = json.loads(path.read_text())
+    for key in ("image_size", "K", "dist", "rms_px", "planes", "R_cr", "T_cr"):
+        assert key in data
+    assert data["note"] == "test"
+    s2 = load_sensor(path)
+    np.testing.assert_allclose(np.asarray(s2.planes), np.asarray(s.planes), rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(s2.camera.K), np.asarray(s.camera.K))
+    assert s2.camera.image_size == (640, 480)
+    # Deterministic bytes without the date stamp.
+    save_sensor(s, tmp_path / "again.json", rms_px=0.12, note="test")
+    assert (tmp_path / "again.json").read_bytes() == path.read_bytes()
+
+
+def _corrupt(tmp_path, mutate):
+    data = sensor_to_dict(default_sensor(), 0.1)
+    mutate(data)
+    path = tmp_path / "bad.json"
+    path.write_text(json.dumps(data))
+    return path
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda d: d.pop("K"), "missing key 'K'"),
+        (lambda d: d.__setitem__("dist", [0.1, 0.2]), "'dist' must have shape"),
+        (lambda d: d.__setitem__("T_cr", [0.0, float("nan"), 1.0]), "non-finite"),
+        (lambda d: d.__setitem__("planes", [[0, 0, 0], [0.01, 0, 0.004]]), "zero normal"),
+        (lambda d: d.__setitem__("planes", [[5.0, 0, 0], [0.01, 0, 0.004]]), "camera centre"),
+        (lambda d: d.__setitem__("R_cr", np.diag([1.0, 1.0, -1.0]).tolist()), "not a proper"),
+        (lambda d: d.__setitem__("R_cr", (2 * np.eye(3)).tolist()), "not a proper"),
+        (lambda d: d.__setitem__("image_size", [640, -480]), "image_size"),
+    ],
+)
+def test_bad_calibration_files_named(tmp_path, mutate, message):
+    with pytest.raises(CalibrationError, match=message):
+        load_sensor(_corrupt(tmp_path, mutate))
+
+
+def test_unreadable_calibration_files(tmp_path):
+    with pytest.raises(CalibrationError, match="no such calibration file"):
+        load_sensor(tmp_path / "nope.json")
+    p = tmp_path / "garbage.json"
+    p.write_text("{not json")
+    with pytest.raises(CalibrationError, match="not valid JSON"):
+        load_sensor(p)
