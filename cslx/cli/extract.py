@@ -80,6 +80,24 @@ def run(args: argparse.Namespace) -> int:
             print(f"cslx extract: calibration {args.calib}: {err}", file=sys.stderr)
             return 2
     stripes = ("h", "v") if args.stripe == "both" else (args.stripe,)
+    if sensor is not None and any(not sensor.has_plane(s) for s in stripes):
+        # A one-plane (line-laser) calibration triangulates its own stripe only.
+        have = sensor.plane_stripes
+        if args.stripe != "both":
+            try:
+                sensor.plane_index(args.stripe)
+            except CalibrationError as err:
+                print(
+                    f"cslx extract: --stripe {args.stripe} with {args.calib}: {err}",
+                    file=sys.stderr,
+                )
+                return 2
+        stripes = tuple(s for s in stripes if s in have)
+        print(
+            f"cslx extract: {args.calib} holds one laser plane ({have[0]} stripe): "
+            f"extracting that stripe only",
+            file=sys.stderr,
+        )
     sigma = args.sigma if args.sigma is not None else DEFAULT_SIGMA
     header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
 
