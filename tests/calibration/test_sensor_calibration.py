@@ -21,9 +21,7 @@ TRUE = default_sensor()
 
 
 def _rot(ax, ay, az):
-    return (
-        cv2.Rodrigues(np.array([ax, ay, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, 0.0, az]))[0]
-    )
+    return cv2.Rodrigues(np.array([ax, ay, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, 0.0, az]))[0]
 
 
 def _poses(rng, n, planes):
