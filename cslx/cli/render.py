@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         sensor = load_sensor(args.calib) if args.calib else default_sensor()
+        sensor.require_planes(2, "rendering (the simulated projector is a cross)")
     except CalibrationError as e:
         print(f"cslx render: {e}", file=sys.stderr)
         return 2
