@@ -332,6 +332,8 @@ def main(**config):
     from cslx.sim import render_calibration
 
     cfg = {**DEFAULT, **config}
+    # Provenance (the git state of the code that runs) before this script writes anything.
+    prov = provenance(cfg)
     sensor_true = default_sensor()
     n_max = max(cfg["n_poses"])
     rows, feats0 = [], None
@@ -387,10 +389,11 @@ def main(**config):
         " at the start and ".join(" / ".join(f"{x:.1f}" for x in la) for la in (load[0], load[-1]))
         + " at the end"
     )
-    prov = provenance(
-        {**cfg, "render_time_s": round(t_render, 1),
-         "total_time_s": round(time.perf_counter() - t_start, 1), "load_avg_start_end": load_txt}
-    )  # fmt: skip
+    prov["config"].update(
+        render_time_s=round(t_render, 1),
+        total_time_s=round(time.perf_counter() - t_start, 1),
+        load_avg_start_end=load_txt,
+    )
     f5 = ["u", "v", "plane", "x_std", "y_std", "z_std", "x_meas", "y_meas", "z_meas", "dx", "dy",
           "dz"]  # fmt: skip
     variants_md = "\n".join(f"- `{v}`: {VARIANTS[v]}." for v in cfg["variants"])
