@@ -234,10 +234,11 @@ def _segment(out: str, seed: int, n: int, sensor, log) -> tuple[list[dict], dict
     return rows, timing
 
 
-def _mm(x: float, fmt: str = ".3f") -> str:
+def _mm(x: float, fmt: str = ".3f", none: str = "n/a") -> str:
+    """`x` in mm, or `none` (callers print the reason next to it)."""
     import math
 
-    return f"{format(x, fmt)} mm" if math.isfinite(x) else "n/a"
+    return f"{format(x, fmt)} mm" if math.isfinite(x) else none
 
 
 def _nan_reasons(row: dict) -> str:
@@ -271,34 +272,23 @@ def _frame_picture(path: str, image, gt: dict, uv: dict, row: dict) -> None:
     from ..files import atomic_path
 
     H, W = image.shape[:2]
-    fig, ax = plt.subplots(figsize=(W / 80, H / 80 + 0.5), dpi=80)
+    fig, ax = plt.subplots(figsize=(W / 64, H / 64 + 0.5), dpi=80)
     ax.imshow(image)
     truth = {"h": (np.arange(W), np.asarray(gt["h_v"])), "v": (np.asarray(gt["v_u"]), np.arange(H))}
     for s in ("h", "v"):
         tu, tv = truth[s]
-        ax.plot(
-            tu,
-            tv,
-            color="#00ff66",
-            lw=5,
-            alpha=0.55,
-            solid_capstyle="butt",
-            label="ground truth" if s == "h" else None,
-        )
-        ax.plot(
-            uv[s][:, 0],
-            uv[s][:, 1],
-            color="#ff00ff",
-            lw=1.8,
-            label="estimate (R−G, MED + Steger)" if s == "h" else None,
-        )
+        label = "ground truth" if s == "h" else None
+        ax.plot(tu, tv, color="#00ff66", lw=9, alpha=0.5, solid_capstyle="butt", label=label)
+        label = "estimate (R−G, MED + Steger)" if s == "h" else None
+        ax.plot(uv[s][:, 0], uv[s][:, 1], color="#ff00ff", lw=2.0, label=label)
     ax.set_xlim(0, W - 1)
     ax.set_ylim(H - 1, 0)
     ax.set_axis_off()
     ax.legend(loc="lower right", fontsize=9, framealpha=0.8)
+    none = "n/a: no centre detected"
     ax.set_title(
-        f"{row['frame']}: median 3-D error h {_mm(row['h_median_mm'])}, "
-        f"v {_mm(row['v_median_mm'])}",
+        f"{row['frame']}: median 3-D error h {_mm(row['h_median_mm'], none=none)}, "
+        f"v {_mm(row['v_median_mm'], none=none)}",
         fontsize=10,
     )
     fig.tight_layout()
@@ -362,8 +352,8 @@ def _report(
     lines += [
         f"Median of the per-frame median errors: horizontal {_mm(_nanmedian(h))} over {n_h} "
         f"of {len(seg)} frames, vertical {_mm(_nanmedian(v))} over {n_v} (frames without a "
-        f"detected stripe left out); bead offset error median "
-        f"|{_mm(_nanmedian(np.abs(off)), '.2f')}| over the {n_off} frames with a bead found.",
+        f"detected stripe left out); bead offset error (median of |estimate − truth|) "
+        f"{_mm(_nanmedian(np.abs(off)), '.2f')} over the {n_off} frames with a bead found.",
         "",
         "Frames with the ground truth (green) and the estimate (magenta) drawn on them, the",
         "frame's errors in the title: `frames/`.",
@@ -382,15 +372,23 @@ def _report(
             "![closed loop](closed_loop.png)",
             "",
         ]
-        lines += [
-            f"- {k}: {v:.3f}" if isinstance(v, float) else f"- {k}: {v}" for k, v in loop.items()
-        ]
+        lines += [f"- {k}: {_loop_value(v)}" for k, v in loop.items()]
         lines.append("")
     lines += ["## Provenance", "", provenance_md(provenance({"elapsed_s": round(elapsed, 1)}))]
     text = "\n".join(lines)
     with atomic_write(os.path.join(out, "report.md"), "w", encoding="utf-8") as f:
         f.write(text)
     return text
+
+
+def _loop_value(v) -> str:
+    import math
+
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "n/a (no frame of the run qualified for this measure)"
+        return f"{v:.3f}"
+    return str(v)
 
 
 def _nanmedian(a) -> float:
@@ -450,7 +448,8 @@ class _Ticker:
         self._thread = threading.Thread(target=self._run, daemon=True)
 
     def _run(self):
-        while not self._stop.wait(1.0):
+        period = 1.0 if sys.stderr.isatty() else 15.0  # a log file gets a line per 15 s
+        while not self._stop.wait(period):
             self._bar.refresh()
 
     def __enter__(self):
