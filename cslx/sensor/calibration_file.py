@@ -180,32 +180,17 @@ def save_sensor(
     stamp: bool = False,
     **extra: Any,
 ) -> None:
-    """Write a `Sensor` as the calibration JSON (docs/contracts.md; extras added verbatim).
+    """Write a `Sensor` as the calibration JSON of docs/contracts.md (extras added verbatim).
 
-    Written atomically: a temporary file in the same folder, renamed over `path` at the end,
-    so an interrupted write leaves the previous file intact.
+    Written atomically (`cslx.files.atomic_write`): a failure leaves the previous file intact.
     """
     write_json_atomic(path, sensor_to_dict(sensor, rms_px, stamp=stamp, **extra))
 
 
 def write_json_atomic(path: str | os.PathLike, data: dict) -> None:
-    """`json.dump` to a temporary file beside `path`, then `os.replace` it over `path`."""
-    import tempfile
+    """`json.dump` through `cslx.files.atomic_write`: the file appears whole or not at all."""
+    from ..files import atomic_write
 
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".json", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(data, f, indent=1)
-            f.write("\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 → what open() would have given
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    with atomic_write(path, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1)
+        f.write("\n")
