@@ -54,8 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--lines",
-        type=int,
-        choices=(1, 2),
+        choices=("1", "2"),
         help="number of laser lines: 1 (a line laser) or 2 (a cross); default: found from "
         "the laser images",
     )
@@ -179,7 +178,8 @@ def _calibrate(args, pattern, images, lasers, robot) -> int:
 
     try:
         result = calibrate_sensor(
-            images, pattern, args.square, laser_images=lasers, lines=args.lines,
+            images, pattern, args.square, laser_images=lasers,
+            lines=int(args.lines) if args.lines else None,
             method=args.method, robot_points=robot, log=warn,
         )  # fmt: skip
     except ValueError as e:  # CalibrationError included: bad views, no line, a poor plane

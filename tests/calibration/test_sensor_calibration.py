@@ -232,6 +232,10 @@ def test_cli_bad_inputs_clear_words(tmp_path, line_v, capsys):
     assert main([*base, "--laser-images", str(imgs), "--robot-points", str(imgs),
                  "--out", str(cam)]) == 2  # fmt: skip
     assert "is a directory" in capsys.readouterr().err
+    # A cross required of a line laser: refused, nothing written.
+    assert main([*base, "--laser-images", str(imgs), "--lines", "2", "--out", str(cam)]) == 2
+    assert "need 2 laser line(s): horizontal line" in capsys.readouterr().err
+    assert not cam.exists()
     assert main([*base, "--camera-only", "--out", str(cam)]) == 0
     capsys.readouterr()
     # A camera-only calibration where a sensor is needed: clear words, not "missing key".
