@@ -1,17 +1,17 @@
 """Closed-loop weld tracking: tracker, controller and a simulated robot over a real pty.
 
-The simulated differential-drive robot (`cslx.runtime.RobotSimulator`, on the far end of a
+The simulated differential-drive robot (`cslx.sim.robot.RobotSimulator`, on the far end of a
 real pseudo-terminal, lock-step mode) starts beside a weld (the stem) that ends at a
 T-intersection with a crossing weld (the bar). Every step:
 
 1. the frame its camera sees from the simulator's true pose is rendered with the nuisances
    (`cslx.sim.render_image`, default rig);
-2. the compiled tracker (`cslx.runtime.tracker.Tracker`) estimates the weld line, with the
-   odometry from the robot's telemetry received over the link;
-3. the path controller (`cslx.runtime.PathController`: follow, approach the junction, turn
-   90° left in place, follow the bar) computes (v, ω), sent over the link as a
-   VELOCITY_COMMAND (the observation goes too) and acknowledged by the robot;
-4. the simulator integrates 1/fps s of motion.
+2. the runtime's one per-frame loop (`cslx.runtime.loop.TrackingLoop`, the same object
+   `cslx track` drives) runs the compiled tracker with the odometry from the robot's
+   telemetry received over the link, the path controller (follow, approach the junction,
+   turn 90° left in place, follow the bar) and sends the observation and the
+   VELOCITY_COMMAND, which the robot acknowledges; the frame's time is the simulated time;
+3. the simulator integrates 1/fps s of motion.
 
 Lock-step: rendering a frame takes about a second on the CPU, so simulated time advances only
 when the loop says so, and the link's watchdog timeouts are raised accordingly.
@@ -32,6 +32,8 @@ import math
 import time
 
 import numpy as np
+
+from ..config import MOTION, Motion
 
 __all__ = ["plot_closed_loop", "run_closed_loop"]
 
@@ -86,7 +88,7 @@ def run_closed_loop(
     seed: int = 0,
     nuisance: str = "clean",
     *,
-    fps: float = 20.0,
+    fps: float = MOTION.fps,
     start_before_mm: float = 250.0,
     start_offset_mm: float = 4.0,
     start_heading_deg: float = 3.0,
@@ -116,6 +118,7 @@ def run_closed_loop(
         tracker fps, loop fps without and with rendering.
     """
     from ..runtime import ControllerConfig, PathController, RobotLink, State, Tracker
+    from ..runtime.loop import LoopConfig, TrackingLoop
     from ..sensor import default_sensor
     from .render import render_image
     from .robot import RobotSimulator, SimulatorConfig
@@ -143,7 +146,12 @@ def run_closed_loop(
         RobotSimulator(pose=start, config=cfg) as sim,
         RobotLink(sim.port, stall_timeout_s=1e6, low_conf_timeout_s=1e6) as link,
     ):
-        last = None
+        loop = TrackingLoop(
+            tracker,
+            controller,
+            link,
+            config=LoopConfig(motion=Motion(MOTION.speed_mm_s, fps), ack_timeout_s=2.0),
+        )
         for i in it:
             pose = sim.pose()
             t0 = time.perf_counter()
@@ -158,29 +166,8 @@ def run_closed_loop(
                     link.latest_state is not None and link.latest_state.t_s >= sim.sim_time - 1e-6
                 )
             )
-            st = link.latest_state
-            odometry = None
-            if st is not None and last is not None:
-                c, s = math.cos(last[2]), math.sin(last[2])
-                d = (st.x_mm - last[0]) * c + (st.y_mm - last[1]) * s
-                dh = st.heading_rad - last[2]
-                odometry = (d, math.atan2(math.sin(dh), math.cos(dh)))
-            if st is not None:
-                last = (st.x_mm, st.y_mm, st.heading_rad)
-            obs = tracker.step(img, dt=dt, odometry=odometry, t=i * dt)
-            cmd = controller.update(
-                dt,
-                obs.offset_mm,
-                obs.heading_deg,
-                obs.confidence,
-                obs.junction,
-                obs.junction_x_mm,
-                robot_heading_rad=None if st is None else st.heading_rad,
-            )
-            link.send_observation(obs.to_message())
-            seq = link.send_command(cmd.v_mm_s, cmd.omega_rad_s)
-            if seq is not None:
-                link.wait_ack(seq, 2.0)
+            done = loop.step(img, f"sim:{i}", t=sim.sim_time)
+            obs, cmd = done.observation, done.command
             sim.advance(dt)
             t2 = time.perf_counter()
             t_render.append(t1 - t0)
