@@ -33,7 +33,9 @@ distance are kept, and the first confident observation resumes the manoeuvre. `d
 caller's measured time between frames (frame timestamps or the clock), never assumed.
 
 T-junction state machine:
-FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed`, the
+FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed` (default
+the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm ahead, 70
+sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
 junction distance x_j is dead-reckoned (x_j −= v dt) between sightings and reset by each
 sighting; when x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
 (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
@@ -75,7 +77,7 @@ class ControllerConfig:
     k_heading: float = 0.05  # 1/s
     min_confidence: float = 0.2
     full_confidence: float = 0.6
-    approach_speed: float = 20.0
+    approach_speed: float = MOTION.speed_mm_s
     turn_direction: int = +1  # +1 left (CCW), −1 right
     turn_rate: float = 0.3  # rad/s during TURN
     turn_radius_mm: float = 0.0  # 0 = in place

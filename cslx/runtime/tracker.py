@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MOTION
+from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS"]
 
@@ -109,6 +110,9 @@ class KalmanConfig:
     # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation
     # artefacts) that the detector took for a crossing bead; weld reinforcement is 1–3 mm.
     junction_min_height_mm: float = 0.8
+    # fuse the heading the vertical stripe sees directly (`weld.heading_from_vertical`)
+    use_vertical_heading: bool = False
+    sigma_heading_floor_deg: float = 0.3  # its standard deviation at least this
 
 
 @dataclasses.dataclass(frozen=True)
@@ -188,7 +192,14 @@ class Observation:
             "status": self.status,
             "stripe_ok": int(bool(self.stripe_ok)),
         }
-        keys = ("measured_offset_mm", "h_confidence", "v_x_mm", "v_confidence", "v_height_mm")
+        keys = (
+            "measured_offset_mm",
+            "h_confidence",
+            "v_x_mm",
+            "v_confidence",
+            "v_height_mm",
+            "v_heading_deg",
+        )
         for k in (*keys, "used_roi"):
             row[k] = self.raw.get(k, NAN)
         return row
@@ -250,6 +261,22 @@ class _WeldLineFilter:
             self.restarts += 1
             return True
         return False
+
+    def update_heading(self, theta: float, sd: float) -> bool:
+        """Fuse a direct heading measurement (rad, its standard deviation rad); gated."""
+        if self.x is None:
+            return False
+        R = max(sd, np.radians(self.c.sigma_heading_floor_deg)) ** 2
+        H = np.array([0.0, 1.0])
+        S = self.P[1, 1] + R
+        nu = theta - self.x[1]
+        if nu * nu > self.c.gate**2 * S:
+            return False
+        K = self.P @ H / S
+        self.x = self.x + K * nu
+        self.P = (np.eye(2) - np.outer(K, H)) @ self.P
+        self.P = 0.5 * (self.P + self.P.T)
+        return True
 
     def update(self, x_c: float, y_c: float, confidence: float) -> bool:
         """Fuse one bead centre; False if gated out (the filter may restart)."""
@@ -329,7 +356,8 @@ class Tracker:
             result, new = pl._process(sensor32, config_, rgb, state, roi)
             fv = result.feature_v
             extra = jnp.stack([fv.height, fv.width]).astype(jnp.float32)
-            return jnp.concatenate([pl.frame_summary(result), extra]), new
+            summary = jnp.concatenate([pl.frame_summary(result), extra])
+            return (summary, result.points_h, result.points_v), new
 
         t0 = time.perf_counter()
         spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
@@ -443,7 +471,7 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        summary, self._state = self._compiled(frame, self._state)
+        (summary, points_h, points_v), self._state = self._compiled(frame, self._state)
         raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
         obs.raw = raw
         obs.med_steps = int(raw["med_steps_h"] + raw["med_steps_v"])
@@ -460,9 +488,21 @@ class Tracker:
 
         kf = self.filter
         accepted = False
+        raw["v_heading_deg"] = raw["v_heading_sd_deg"] = NAN
         if raw["h_found"] > 0.5:
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], raw["h_confidence"])
             obs.bead_width_mm, obs.bead_height_mm = raw["h_width_mm"], raw["h_height_mm"]
+            if accepted and self.kalman.use_vertical_heading:
+                th, sd = heading_from_vertical(
+                    np.asarray(points_h),
+                    np.asarray(points_v),
+                    raw["h_y_mm"],
+                    raw["h_width_mm"],
+                    self.x_ref,
+                )
+                raw["v_heading_deg"], raw["v_heading_sd_deg"] = th, sd
+                if math.isfinite(th):
+                    kf.update_heading(math.radians(th), math.radians(sd))
         raw["accepted"] = float(accepted)
         if kf.initialised:
             theta = kf.x[1]

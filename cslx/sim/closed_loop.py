@@ -94,6 +94,7 @@ def run_closed_loop(
     start_heading_deg: float = 3.0,
     turn_rate: float = 0.5,
     settle_s: float = 5.0,
+    after_turn_frames: int | None = None,
     tracker=None,
     progress: bool = False,
     log=None,
@@ -109,6 +110,8 @@ def run_closed_loop(
         turn_rate: the controller's turning rate at the T, rad/s.
         settle_s: the "steady" statistics leave out the first settle_s seconds (the
             controller's response to the initial error, time constant ≈ 2.7 s).
+        after_turn_frames: end the run this many frames after the turn was completed
+            (None: run all `n_frames`).
         tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.
 
     Returns:
@@ -137,6 +140,7 @@ def run_closed_loop(
     t_loop = []
     t_render = []
     follow = 0
+    turned_at = None
     it = range(n_frames)
     if progress:
         from tqdm import tqdm
@@ -173,6 +177,8 @@ def run_closed_loop(
             t_render.append(t1 - t0)
             t_loop.append(t2 - t1)
             if controller.turns_completed > 0:
+                if follow == 0:
+                    turned_at = i
                 follow = 1
             truth = _truth(world, pose, sensor, follow, sizes)
             counted = (
@@ -200,9 +206,13 @@ def run_closed_loop(
                     status=obs.status,
                     counted=int(counted),
                     estimation_error_mm=obs.offset_mm - truth["true_offset_mm"],
+                    nuisance=str(nuisance),
                     **truth,
                 )
             )
+            if after_turn_frames is not None and turned_at is not None:
+                if i - turned_at >= after_turn_frames:
+                    break
     counted = [r for r in rows if r["counted"]]
     steady = np.array([r["tracking_error_mm"] for r in counted if r["t_s"] >= settle_s])
     err = np.array([r["tracking_error_mm"] for r in counted])
@@ -218,8 +228,9 @@ def run_closed_loop(
             bar_width_mm=sizes[2],
             bar_height_mm=sizes[3],
         ),
-        n_frames=n_frames,
+        n_frames=len(rows),
         n_counted=len(counted),
+        blind_stops=controller.blind_stops,
         mean_error_mm=float(err.mean()) if err.size else nan,
         p95_error_mm=float(np.percentile(err, 95)) if err.size else nan,
         max_error_mm=float(err.max()) if err.size else nan,
@@ -238,16 +249,23 @@ def run_closed_loop(
     )
 
 
-def plot_closed_loop(result: dict, path: str) -> None:
-    """Figure 22: the welds' centre lines and the robot's trail, and the error over time."""
+def plot_closed_loop(result: dict, path: str | None = None, axes=None, label: str = "") -> None:
+    """Figure 22: the welds' centre lines and the robot's trail, and the error over time.
+
+    Draws into `axes` (a pair) when given, else a new figure saved to `path`.
+    """
     import matplotlib
 
-    matplotlib.use("Agg")
+    if axes is None:
+        matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rows = result["rows"]
     w = result["welds"]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
+    if axes is None:
+        fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
+    else:
+        fig, (a, b) = None, axes
     # the look-ahead point is drawn where it is on the followed weld (during the turn and
     # past the stem's end the stripe line meets the weld's extension far away)
     on = [r for r in rows if r["counted"]]
@@ -274,7 +292,7 @@ def plot_closed_loop(result: dict, path: str) -> None:
     a.set_ylim(lo_y, hi_y)
     a.set_xlabel("x_w (mm)")
     a.set_ylabel("y_w (mm)")
-    a.set_title("Welds (grey: beads) and the robot's trail")
+    a.set_title(f"{label}Welds (grey: beads) and the robot's trail", fontsize=9)
     a.legend(loc="best", fontsize=8)
     t = np.array([r["t_s"] for r in rows])
     err = np.array([r["tracking_error_mm"] if r["counted"] else np.nan for r in rows])
@@ -288,11 +306,12 @@ def plot_closed_loop(result: dict, path: str) -> None:
     b.set_xlabel("t (s)")
     b.set_ylabel("mm")
     b.set_title(
-        f"all: mean {result['mean_error_mm']:.2f}, max {result['max_error_mm']:.2f} mm; "
-        f"steady: mean {result['steady_mean_error_mm']:.2f}, "
-        f"max {result['steady_max_error_mm']:.2f} mm"
+        f"{label}mean {result['mean_error_mm']:.2f}, p95 {result['p95_error_mm']:.2f}, "
+        f"max {result['max_error_mm']:.2f} mm; turns {result['turns_completed']}",
+        fontsize=9,
     )
-    b.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    b.legend(fontsize=7)
+    if fig is not None:
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
