@@ -16,6 +16,7 @@ from __future__ import annotations
 import concurrent.futures
 import os
 import pathlib
+import pickle
 
 from experiments.common import RESULTS, load_average, parser
 
@@ -30,7 +31,7 @@ DEFAULTS = dict(
     start_heading_deg=3.0,
     turn_rate=0.5,
     settle_s=5.0,
-    after_turn_frames=60,
+    after_turn_frames=40,
 )
 
 KEYS = (
@@ -51,7 +52,7 @@ KEYS = (
 )
 
 
-def _one(nuisance: str, config: dict) -> dict:
+def _one(nuisance: str, config: dict, parts: pathlib.Path | None = None) -> dict:
     from cslx.environment import configure
 
     configure()
@@ -59,7 +60,25 @@ def _one(nuisance: str, config: dict) -> dict:
 
     result = run_closed_loop(nuisance=nuisance, **config)
     result["load_after"] = load_average()
+    if parts is not None:  # each run is kept as it completes (`--collect` writes from them)
+        parts.mkdir(parents=True, exist_ok=True)
+        tmp = parts / f"{nuisance}.pkl.tmp"
+        tmp.write_bytes(pickle.dumps(result))
+        os.replace(tmp, parts / f"{nuisance}.pkl")
     return result
+
+
+def collect(out_dir: str | os.PathLike | None = None, **config) -> dict[str, dict]:
+    """Write the outputs from the runs kept so far (out_dir/fig22_parts/*.pkl)."""
+    out = pathlib.Path(out_dir) if out_dir else RESULTS
+    parts = out / "fig22_parts"
+    results = {
+        n: pickle.loads((parts / f"{n}.pkl").read_bytes())
+        for n in NUISANCES
+        if (parts / f"{n}.pkl").exists()
+    }
+    _write(results, {**DEFAULTS, **config}, out, "see each run", "several")
+    return results
 
 
 def main(
@@ -74,13 +93,15 @@ def main(
     """
     cfg = {**DEFAULTS, **config}
     load_before = load_average()
+    out = pathlib.Path(out_dir) if out_dir else RESULTS
+    parts = out / "fig22_parts"
     if jobs > 1:
         with concurrent.futures.ProcessPoolExecutor(jobs) as pool:
-            futures = {n: pool.submit(_one, n, cfg) for n in nuisances}
+            futures = {n: pool.submit(_one, n, cfg, parts) for n in nuisances}
             results = {n: f.result() for n, f in futures.items()}
     else:
-        results = {n: _one(n, cfg) for n in nuisances}
-    _write(results, cfg, pathlib.Path(out_dir) if out_dir else RESULTS, load_before, jobs)
+        results = {n: _one(n, cfg, parts) for n in nuisances}
+    _write(results, cfg, out, load_before, jobs)
     return results
 
 
@@ -141,15 +162,19 @@ if __name__ == "__main__":
     p = parser(__doc__.splitlines()[0], DEFAULTS["n_frames"], DEFAULTS["seed"])
     p.add_argument("--nuisance", action="append", choices=NUISANCES, help="(repeatable)")
     p.add_argument("--jobs", type=int, default=1, help="runs in parallel processes")
+    p.add_argument("--collect", action="store_true", help="write outputs from the kept runs")
     a = p.parse_args()
     n = 60 if a.quick else a.frames
-    res = main(
-        out_dir=a.out,
-        nuisances=tuple(a.nuisance or NUISANCES),
-        jobs=a.jobs,
-        n_frames=n,
-        seed=a.seed,
-    )
+    if a.collect:
+        res = collect(out_dir=a.out, n_frames=n, seed=a.seed)
+    else:
+        res = main(
+            out_dir=a.out,
+            nuisances=tuple(a.nuisance or NUISANCES),
+            jobs=a.jobs,
+            n_frames=n,
+            seed=a.seed,
+        )
     for name, r in res.items():
         print(
             f"{name}: turns {r['turns_completed']}; tracking error mean {r['mean_error_mm']:.2f}"

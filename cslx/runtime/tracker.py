@@ -33,6 +33,12 @@ filter over s = (e, θ):
   their mean, moved to x_ref with the current heading, with a broad covariance. A run of
   rejections that never agree (clutter) restarts it only after `give_up_after` frames.
 
+- direct heading (`use_vertical_heading`): where the vertical stripe sees the weld's
+  direction (`cslx.runtime.weld.heading_from_vertical`), that heading is fused as a
+  measurement of θ (standard deviation at least `sigma_heading_floor_deg`, gated like the
+  centres). Without odometry a rotation of the robot is otherwise seen only as an offset
+  change of x_ref·δ (150 mm lever), which the filter cannot tell from a heading.
+
 Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
 
 Confidence ∈ [0, 1]: the bead detector's confidence (square-rooted: the product of four
