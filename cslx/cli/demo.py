@@ -215,7 +215,7 @@ def _report(out: str, cal: dict, seg: list[dict], loop: dict | None, elapsed: fl
         "",
         "## 2. Segmentation (MED + Steger in R−G) and weld bead, per frame",
         "",
-        "Errors are 3-D distances to the exact ground truth (DESIGN.md, Metrics); the bead is",
+        "Errors are 3-D distances to the exact ground truth (docs/metrics.md; the bead is",
         "measured on the profile triangulated with the *calibrated* sensor.",
         "",
     ]

@@ -145,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-# ---------------------------------------------------------------- several devices (cslx.segmentation.shard)
+# ------------------------------------------------ several devices (cslx.segmentation.shard)
 _BATCH_PER_DEVICE = 16
 
 
@@ -180,7 +180,7 @@ def _sharded_path(args: argparse.Namespace) -> _Pending | None:
 
 
 def _flush(pending: _Pending, stripes, args, sigma, sensor, writer) -> int:
-    """Centres of the pending images with `cslx.segmentation.shard.extract_batch`; rows in input order."""
+    """Centres of the pending images by `cslx.segmentation.shard.extract_batch`, in input order."""
     import numpy as np
 
     from ..segmentation import centres_to_pixels

@@ -1,4 +1,4 @@
-"""Render scenes with exact ground truth (DESIGN.md, Contracts: rendered data).
+"""Render scenes with exact ground truth (docs/contracts.md, rendered data).
 
 Writes PNG frames, the true calibration as DIR/sensor.json and DIR/gt.npz holding, with a
 leading frame axis in the order of `frames`, `h_v` (F, W), `h_xyz` (F, W, 3), `v_u` (F, H),

@@ -126,7 +126,7 @@ class _Message:
 
 @dataclasses.dataclass(frozen=True)
 class Observation(_Message):
-    """What the vision side sees (DESIGN.md tracking-log fields). NaN = unknown.
+    """What the vision side sees (docs/contracts.md tracking log fields). NaN = unknown.
 
     t_s: capture time, s (float64). offset_mm: y_r of the weld centre line at the horizontal
     stripe (+ = weld to the robot's left). heading_deg: weld direction relative to x_r, CCW +.

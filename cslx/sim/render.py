@@ -367,7 +367,7 @@ def write_dataset(
     names: list[str] | None = None,
     extra: dict[str, Any] | None = None,
 ) -> list[str]:
-    """Write rendered data per DESIGN.md (Contracts): PNG frames, `sensor.json`, `gt.npz`.
+    """Write rendered data per docs/contracts.md: PNG frames, `sensor.json`, `gt.npz`.
 
     Args:
         out_dir: created if missing.
