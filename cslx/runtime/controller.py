@@ -210,9 +210,15 @@ class PathController:
         confident = seen_offset and confidence >= c.min_confidence
         if self.state is not State.FOLLOW:
             confident = confident or bool(sensor_ok) or sighted
-        # speed may not rise on a frame that is not confident or less confident than the last
-        falling = confidence < self._last_confidence
-        self._last_confidence = confidence
+        # speed may not rise on a frame that is not confident or less confident than the last.
+        # Dead-reckoning to a confirmed junction (APPROACH/TURN without a bead) the evidence
+        # is the measured plate: its confidence is 1 with a stripe profile, else 0 (a
+        # decaying bead confidence there would freeze the approach at a crawl).
+        evidence = confidence
+        if self.state is not State.FOLLOW and (not seen_offset or scale <= 0.0):
+            evidence = 1.0 if (sensor_ok or sighted) else 0.0
+        falling = evidence < self._last_confidence
+        self._last_confidence = evidence
         self._cap = abs(self.v) if (falling or not confident) else math.inf
         self.blind_s = 0.0 if confident else self.blind_s + dt
         if self.blind_s > c.blind_stop_s:

@@ -292,3 +292,17 @@ def test_speed_never_rises_while_confidence_falls():
 def test_dt_must_be_measured_and_finite(dt):
     with pytest.raises(ValueError, match="dt"):
         PathController().update(dt, 1.0)
+
+
+def test_approach_over_measured_plate_keeps_its_speed():
+    """Bead lost past the stem's end at a low speed: the plate is measured, so the approach
+    returns to approach_speed (braking-limited) instead of crawling."""
+    c = ControllerConfig()
+    ctrl = PathController(c)
+    _approaching(ctrl, junction_x=200.0)
+    for _ in range(10):  # the bead fades as the stripe nears the crossing weld
+        ctrl.update(0.05, 0.0, 0.0, 0.3)
+    slow = ctrl.v
+    for k in range(60):  # then no bead, plate measured; the tracker's confidence decays
+        cmd = ctrl.update(0.05, math.nan, math.nan, 0.3 * 0.85**k, sensor_ok=True)
+    assert slow < c.approach_speed and cmd.v_mm_s > slow + 5.0
