@@ -36,7 +36,7 @@ HELP = "stripe centres of images → centre CSV (CM, LA, QA, AA, Steger, MED + S
 METHODS = ("cm", "la", "qa", "aa", "steger", "med")
 #: Images decoded ahead of the one being segmented, and the decoding threads.
 READ_AHEAD = 8
-READ_THREADS = 2
+READ_THREADS = 1  # one decoder keeps ahead of the compute; more compete with XLA on 2 cores
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
