@@ -168,8 +168,8 @@ def gaussian_kernels(sigma: float):
 def opencv_steger(img: np.ndarray, kernels, *, threshold=0.1, snr=5.0, max_offset=0.6):
     """Steger per column with cv2.sepFilter2D derivatives and a NumPy selection (a peer).
 
-    Same closed-form Hessian eigen-decomposition, offset and acceptance as `cslx.segmentation.steger`;
-    per column the strongest accepted point (argmax), moved to the column along the line.
+    Same closed-form Hessian eigen-decomposition, offset and acceptance as
+    `cslx.segmentation.steger`; per column the strongest accepted point (argmax), moved to the column along the line.
     """
     import cv2
 

@@ -39,6 +39,7 @@ from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.med import default_filter_length, initial_filter, med
+from ..segmentation.shard import map_frames, platform_vmap_size
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .weld import WeldConfig, WeldFeature, weld_features
@@ -54,6 +55,7 @@ __all__ = [
     "SUMMARY_FIELDS",
     "stripe_points",
     "clean_profile",
+    "colour_sum",
 ]
 
 
@@ -74,12 +76,19 @@ class PipelineConfig(eqx.Module):
     median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
         (`clean_profile`: gross outliers out, light smoothing along the stripe).
     use_med: False skips MED (Steger on the monochrome image), for ablations.
-    roi_med: run MED inside the tracking bands too. Off by default: on bands of 64–192
-        samples MED's filter (L_roi 16–64, warm-started) shifted the sunny-frame centres by
-        a median 1.0–1.9 px where full-frame MED and Steger on the band both stay at
-        0.1–0.2 px (measured on rendered "sunny" frames); the short segments with their
-        tapered ends seem to defeat the delay estimate. With it off, tracking mode is Steger
-        on the colour-space band, warm state unused, and matches full-frame accuracy.
+    roi_med: run MED inside the tracking bands too (default on). Band MED used to be off:
+        on bands of 64–192 samples its filter shifted centres by 1.0–1.9 px. The cause was
+        the delay estimate, not the short segments: on short segments MED converges to a
+        one-sided, edge-enhancing filter, and the cross-correlation peak (exact only for a
+        symmetric filter) sits 1–2 px from where the detector sees the filtered ridge. With
+        ``med_delay="ridge"`` the delay is the measured displacement of the ridge itself
+        (`cslx.segmentation.med_fft.ridge_delay`): band centres then agree with full-frame
+        MED to a median 0.00–0.04 px on held-out rendered frames (issue 13).
+    med_delay: ``"ridge"`` (default; the ridge displacement at Steger's scale ``sigma``) or
+        ``"xcorr"`` (the correlation peak of `cslx.segmentation.med.med`'s default), for the
+        full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
+        centres 0.05–0.15 px off the ground truth where "ridge" and Steger on the colour
+        image stay within 0.05 px.
     weld: the bead detector's settings. The junction threshold is lowered to 0.1 (the
         detector's default is 0.3): on rendered T frames the crossing bead on the vertical
         stripe is found at the right x_r (±0.5 mm) with confidence 0.15–0.25, and no
@@ -105,7 +114,8 @@ class PipelineConfig(eqx.Module):
     outlier_mm: float = eqx.field(static=True, default=1.0)
     smooth_half: int = eqx.field(static=True, default=3)
     use_med: bool = eqx.field(static=True, default=True)
-    roi_med: bool = eqx.field(static=True, default=False)
+    roi_med: bool = eqx.field(static=True, default=True)
+    med_delay: str = eqx.field(static=True, default="ridge")
     weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
 
     def lengths(self, height: int, width: int) -> tuple[int, int]:
@@ -189,7 +199,16 @@ def init_state(
 def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med):
     """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis)."""
     if use_med:
-        r = med(I, axis=axis, L=L, init=W0, tol=config.tol, max_steps=max_steps)
+        r = med(
+            I,
+            axis=axis,
+            L=L,
+            init=W0,
+            tol=config.tol,
+            max_steps=max_steps,
+            delay=config.med_delay,
+            ridge_sigma=config.sigma,
+        )
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
@@ -308,8 +327,7 @@ def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: Pipe
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     dtype = state.filter_h.dtype
-    x = rgb.astype(dtype)
-    I = x @ jnp.asarray(config.weights, dtype)
+    I = colour_sum(rgb, config.weights, dtype)
     if roi and config.roi_enabled(height, width):
         ch, cv, steps, kurt, new = lax.cond(
             state.tracking,
@@ -335,10 +353,27 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
         med_steps=steps,
         kurtosis=kurt.astype(dtype),
         used_roi=used_roi,
-        brightness=jnp.mean(x),
+        brightness=jnp.mean(rgb.astype(dtype)),
         saturated=jnp.mean(jnp.any(rgb >= 255, axis=-1).astype(dtype)),
     )
     return result, new
+
+
+def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"]:
+    """Eq. (8), I = w_r R + w_g G + w_b B, as a channel-weighted sum over the static weights.
+
+    Zero weights are skipped; the same values as ``rgb.astype(dtype) @ w`` (a matrix
+    product over a length-3 axis), which XLA's CPU backend runs ≈ 3× slower
+    (results/bench_speed.md).
+    """
+    out = None
+    for c, w in enumerate(weights):
+        if w == 0:
+            continue
+        term = rgb[..., c].astype(dtype)
+        term = term if w == 1 else (-term if w == -1 else float(w) * term)
+        out = term if out is None else out + term
+    return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
 def _check_frame(sensor: Sensor, rgb) -> None:
@@ -384,9 +419,9 @@ def process_frame(
     return _process_frame(sensor, config, rgb, state, roi)
 
 
-@functools.partial(jax.jit, static_argnames=("roi",))
-def _process_batch(sensor, config, frames, state, roi):
-    return jax.vmap(lambda f: _process(sensor, config, f, state, roi))(frames)
+@functools.partial(jax.jit, static_argnames=("roi", "vmap_size"))
+def _process_batch(sensor, config, frames, state, roi, vmap_size):
+    return map_frames(lambda f: _process(sensor, config, f, state, roi), frames, vmap_size)
 
 
 def process_batch(
@@ -396,11 +431,15 @@ def process_batch(
     state: PipelineState | None = None,
     *,
     roi: bool = False,
+    vmap_size: int | None | str = "auto",
 ) -> tuple[FrameResult, PipelineState]:
-    """`process_frame` on independent frames (vmap), all starting from the same state.
+    """`process_frame` on independent frames, all starting from the same state.
 
     For archives of unrelated frames; the results carry a leading frame axis. The default
     state is `init_state` (cold, flat MED filters) and the full frame is processed.
+    ``vmap_size``: frames vectorised together (`cslx.segmentation.shard.map_frames`); "auto"
+    is one at a time (`lax.map`) on the CPU, where `vmap` made the per-frame cost grow with
+    the batch (99 → 141 ms from 1 to 16 frames, issue 13), and the whole batch elsewhere.
     """
     frames = jnp.asarray(frames)
     if frames.ndim != 4:
@@ -408,7 +447,9 @@ def process_batch(
     _check_frame(sensor, frames[0])
     if state is None:
         state = init_state(config, sensor.camera.image_size)
-    return _process_batch(sensor, config, frames, state, roi)
+    if vmap_size == "auto":
+        vmap_size = platform_vmap_size(d.platform for d in frames.devices())
+    return _process_batch(sensor, config, frames, state, roi, vmap_size)
 
 
 #: Names of the entries of `frame_summary`, in order.
