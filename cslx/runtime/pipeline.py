@@ -19,8 +19,12 @@ their offsets dynamic (`lax.dynamic_slice`), so one compiled program serves ever
 `lax.cond` picks the band branch or the full-frame branch (on the CPU only the chosen branch
 runs). The MED filters of the bands are shorter (``L_roi``, a band is a short segment) and
 kept apart from the full-frame filters. A stripe that leaves its band, or too few centres,
-switches the next frame back to the full frame. Centres outside the band are reported as not
-found; inside it they agree with full-frame processing (tests/test_pipeline.py).
+switches the next frame back to a frame without tracking state. Such a frame (the first one
+too) takes its bands from a cheap first pass (the brightest sample of every column / row,
+`_first_pass`) and runs MED from the band filters to convergence there; only when the
+stripes do not fit the bands does it run MED on the full frame. Centres outside the band are
+reported as not found; inside it they agree with full-frame processing
+(tests/runtime/test_pipeline.py).
 
 Everything is pure JAX on one frame and jit-compiled at `process_frame`; `process_batch`
 vmaps it over frames (under vmap `lax.cond` evaluates both branches: archives should use
@@ -72,6 +76,12 @@ class PipelineConfig(eqx.Module):
     roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
+    first_pass / first_pass_fraction: on a frame without tracking state (the first, or
+        after the stripes were lost) with the ROI allowed, locate the bands from the
+        brightest sample of each column / row (`_first_pass`) and run MED (from the band
+        filters in the state, up to ``max_steps``) and Steger in the bands when at least
+        ``first_pass_fraction`` of those samples fall inside them; otherwise, or with
+        ``roi=False``, the full frame. MED only where the stripe is (issue 13).
     min_valid_fraction: share of columns (rows) with a centre needed to keep tracking mode.
     median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
         (`clean_profile`: gross outliers out, light smoothing along the stripe).
@@ -109,6 +119,8 @@ class PipelineConfig(eqx.Module):
     roi_half_h: int = eqx.field(static=True, default=32)
     roi_half_w: int = eqx.field(static=True, default=64)
     roi_margin: int = eqx.field(static=True, default=8)
+    first_pass: bool = eqx.field(static=True, default=True)
+    first_pass_fraction: float = eqx.field(static=True, default=0.9)
     min_valid_fraction: float = eqx.field(static=True, default=0.5)
     median_half: int = eqx.field(static=True, default=4)
     outlier_mm: float = eqx.field(static=True, default=1.0)
@@ -155,7 +167,8 @@ class FrameResult(NamedTuple):
     lightly smoothed; NaN where not valid or dropped). feature_h / feature_v:
     the beads (`cslx.runtime.weld.WeldFeature`); junction: the T-junction flag. med_steps: (2,)
     fixed-point steps (h, v); kurtosis: (2,) excess kurtosis of the MED outputs. used_roi:
-    the bands were processed (tracking mode). brightness: mean grey level of the frame
+    only the bands were processed (tracking mode, or the bands of the first pass on a frame
+    without tracking state). brightness: mean grey level of the frame
     (0..255); saturated: fraction of pixels with a channel at 255.
     """
 
@@ -230,21 +243,18 @@ def _full(I, state: PipelineState, config: PipelineConfig):
     ch, Wh, sh, kh = _stripe(I, state.filter_h, 0, L_h, config, config.max_steps, config.use_med)
     cv, Wv, sv, kv = _stripe(I, state.filter_v, 1, L_v, config, config.max_steps, config.use_med)
     new = eqx.tree_at(lambda s: (s.filter_h, s.filter_v), state, (Wh, Wv))
-    return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new
+    return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new, jnp.zeros((), bool)
 
 
-def _bands(I, state: PipelineState, config: PipelineConfig):
+def _bands(I, state: PipelineState, config: PipelineConfig, max_steps=None):
+    max_steps = config.roi_max_steps if max_steps is None else max_steps
     height, width = I.shape
     hh, hw = 2 * config.roi_half_h, 2 * config.roi_half_w
     band_h = lax.dynamic_slice(I, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
     band_v = lax.dynamic_slice(I, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
     med_on = config.use_med and config.roi_med
-    ch, Wh, sh, kh = _stripe(
-        band_h, state.roi_filter_h, 0, config.L_roi, config, config.roi_max_steps, med_on
-    )
-    cv, Wv, sv, kv = _stripe(
-        band_v, state.roi_filter_v, 1, config.L_roi, config, config.roi_max_steps, med_on
-    )
+    ch, Wh, sh, kh = _stripe(band_h, state.roi_filter_h, 0, config.L_roi, config, max_steps, med_on)
+    cv, Wv, sv, kv = _stripe(band_v, state.roi_filter_v, 1, config.L_roi, config, max_steps, med_on)
     new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
     return (
         _shift(ch, state.row0),
@@ -252,6 +262,45 @@ def _bands(I, state: PipelineState, config: PipelineConfig):
         jnp.stack([sh, sv]),
         jnp.stack([kh, kv]),
         new,
+        jnp.ones((), bool),
+    )
+
+
+def _first_pass(I, state: PipelineState, config: PipelineConfig):
+    """Bands from a cheap first pass on a frame without tracking state: (state, fits).
+
+    The brightest sample of every column (row) of the monochrome image is a rough stripe
+    position; the bands are centred on their medians. They are used when nearly all of those
+    positions fall inside (the `_next_bands` rule: 98 %, away from the band edges); stray
+    maxima (the other stripe, a glint) are the few columns left out. Otherwise the frame
+    goes through full-frame MED.
+    """
+    height, width = I.shape
+    hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
+
+    def band(peaks, half, size):
+        centre = jnp.median(peaks.astype(I.dtype))
+        start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
+        lo = jnp.where(start == 0, -1, start + m)
+        hi = jnp.where(start == size - 2 * half, size, start + 2 * half - 1 - m)
+        inside = jnp.mean((peaks >= lo) & (peaks <= hi))
+        return start, inside >= config.first_pass_fraction
+
+    row0, ok_h = band(jnp.argmax(I, axis=0), hh, height)
+    col0, ok_v = band(jnp.argmax(I, axis=1), hw, width)
+    new = eqx.tree_at(lambda s: (s.row0, s.col0), state, (row0, col0))
+    return new, ok_h & ok_v
+
+
+def _cold(I, state: PipelineState, config: PipelineConfig):
+    """A frame without tracking: the bands of `_first_pass` if the stripes fit, else full."""
+    if not config.first_pass:
+        return _full(I, state, config)
+    banded, fits = _first_pass(I, state, config)
+    return lax.cond(
+        fits,
+        lambda: _bands(I, banded, config, config.max_steps),
+        lambda: _full(I, state, config),
     )
 
 
@@ -329,15 +378,13 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
     dtype = state.filter_h.dtype
     I = colour_sum(rgb, config.weights, dtype)
     if roi and config.roi_enabled(height, width):
-        ch, cv, steps, kurt, new = lax.cond(
+        ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,
             lambda: _bands(I, state, config),
-            lambda: _full(I, state, config),
+            lambda: _cold(I, state, config),
         )
-        used_roi = state.tracking
     else:
-        ch, cv, steps, kurt, new = _full(I, state, config)
-        used_roi = jnp.zeros((), bool)
+        ch, cv, steps, kurt, new, used_roi = _full(I, state, config)
     new = _next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
     Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)

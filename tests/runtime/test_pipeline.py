@@ -63,10 +63,13 @@ def test_roi_keeps_accuracy_and_batch_equals_frames(scene):
     state0 = init_state(config, sensor.camera.image_size)
     fulls = []
     for img, gt in frames:
-        full, state = process_frame(sensor, config, img, state0)
+        full, state = process_frame(sensor, config, img, state0, roi=False)
         fulls.append(full)
         assert not bool(full.used_roi) and bool(state.tracking)
-        roi, state2 = process_frame(sensor, config, img, state)
+        # a cold frame with the ROI allowed: bands from the first pass, MED converged there
+        first, state1 = process_frame(sensor, config, img, state0)
+        assert bool(first.used_roi) and not bool(state0.tracking) and bool(state1.tracking)
+        roi, state2 = process_frame(sensor, config, img, state1)
         assert bool(roi.used_roi) and bool(state2.tracking)
         (fh, fv), (rh, rv) = _pixel_error(full, gt), _pixel_error(roi, gt)
         # both well below a pixel; the bands are no worse than the full frame (+0.05 px slack)
@@ -75,9 +78,11 @@ def test_roi_keeps_accuracy_and_batch_equals_frames(scene):
         # MED runs in the bands (issue 13) and is unbiased: the band centres are the full
         # frame's centres (median difference within 0.05 px).
         assert np.all(np.asarray(roi.med_steps) > 0)
-        for a, b in ((roi.centres_h, full.centres_h), (roi.centres_v, full.centres_v)):
-            both = np.asarray(a.valid & b.valid)
-            assert abs(np.median(np.asarray(a.pos)[both] - np.asarray(b.pos)[both])) < 0.05
+        for r in (first, roi):
+            for a, b in ((r.centres_h, full.centres_h), (r.centres_v, full.centres_v)):
+                both = np.asarray(a.valid & b.valid)
+                assert both.mean() > 0.9
+                assert abs(np.median(np.asarray(a.pos)[both] - np.asarray(b.pos)[both])) < 0.05
         assert np.asarray(roi.centres_h.valid).mean() > 0.95
         assert np.asarray(roi.centres_v.valid).mean() > 0.95
         assert abs(float(roi.feature_h.position) - gt["offset_mm"]) < 1.0
