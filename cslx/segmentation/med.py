@@ -47,7 +47,13 @@ Choices where the paper is vague:
   segments (weighted like R), refined on its band-limited interpolant (Newton on
   c'(d) = 0, unbiased for a symmetric response, unlike a 3-point parabola), and undone by a
   Fourier shift: the output is B(i + d), aligned with the input rows. The filter's sign is
-  fixed so that the correlation is positive (the stripe stays bright).
+  fixed so that the correlation is positive (the stripe stays bright). The correlation peak
+  is the delay of a symmetric (linear-phase) filter only; MED's filter is free, and on short
+  segments (the tracking bands) it becomes one-sided and edge-enhancing, whose ridge a
+  detector of scale σ sees 1–2 px from the correlation peak (issue 13; on full 640×480
+  frames 0.05–0.15 px). ``delay="ridge"`` measures the delay where it matters: the median
+  displacement of the stripe's ridge at scale σ from input to output segments
+  (`med_fft.ridge_delay`); the pipeline uses it.
 - Start (Table 2, step 1): ``init="flat"`` is W = 1/√L; ``"impulse"`` a unit impulse at
   L//2 (the usual MED start); an (L,) array warm-starts from the previous frame's filter.
   Table 2, step 2 cites "Equation (11)" for the output: it means eq. (18).
