@@ -36,8 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--loop-frames",
         type=int,
-        default=300,
-        help="closed-loop frames at 20 fps (default 300: along the weld, through the T)",
+        default=360,
+        help="most closed-loop frames at 20 fps (default 360; the run ends 40 frames after "
+        "the turn at the T, about 260 frames)",
     )
 
 
@@ -402,7 +403,11 @@ def _closed_loop(out: str, seed: int, n: int, log) -> dict | None:
     from ..sim.closed_loop import plot_closed_loop, run_closed_loop
 
     log(f"closed loop: {n} frames along a weld towards a T-intersection ...")
-    res = run_closed_loop(n_frames=n, seed=seed, progress=True)
+    # 220 mm before the T: the junction is in view almost at once, and the run ends 40
+    # frames after the turn (the stem, the T and the crossing weld in ≈ 260 frames)
+    res = run_closed_loop(
+        n_frames=n, seed=seed, progress=True, start_before_mm=220.0, after_turn_frames=40
+    )
     plot_closed_loop(res, os.path.join(out, "closed_loop.png"))
     keys = (
         "n_frames n_counted mean_error_mm max_error_mm steady_mean_error_mm steady_max_error_mm "
