@@ -388,6 +388,7 @@ class Tracker:
         sensor = path_or_sensor
         if not isinstance(sensor, Sensor):
             sensor = load_sensor(path_or_sensor)
+        sensor.require_planes(2, "tracking")  # CalibrationError naming what is missing
         return cls(sensor, config, log=log, **kwargs)
 
     def _stripe_x(self) -> float:
