@@ -139,7 +139,14 @@ def _write(results: dict, config: dict, out_dir: pathlib.Path, load_before: str,
         f"{config['settle_s']:g} s. The paper reports < 2 mm average tracking error. "
         "`blind_stops`: times the controller stopped the robot for lack of a confident "
         "observation.\n\n",
-        f"Turn completed in every nuisance kind: **{'yes' if done else 'no'}**.\n\n",
+        f"Turn completed in every nuisance kind run ({', '.join(results)}): "
+        f"**{'yes' if done else 'no'}**."
+        + (
+            f" Not run this time: {', '.join(n for n in NUISANCES if n not in results)}."
+            if len(results) < len(NUISANCES)
+            else ""
+        )
+        + "\n\n",
         md_table(table, ["nuisance", *KEYS]),
         "\n\nWelds: "
         + "; ".join(
