@@ -313,5 +313,8 @@ def plot_closed_loop(result: dict, path: str | None = None, axes=None, label: st
     b.legend(fontsize=7)
     if fig is not None:
         fig.tight_layout()
-        fig.savefig(path, dpi=120)
+        from ..files import atomic_path
+
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=120)
         plt.close(fig)
