@@ -3,9 +3,11 @@
 Writes one row per centre with header `image,stripe,u,v` (plus `x,y,z` in mm, camera frame,
 when --calib is given): stripe `h` has at most one centre per image column, stripe `v` at
 most one per image row; pixel coordinates are OpenCV's (origin at the centre of the top-left
-pixel). Unreadable images, images of another size than the calibration and frames without a
-stripe are reported on stderr; the other images are still processed, and the exit status is
-non-zero if any image failed.
+pixel). The default method "linked" adds the optional columns `sigma_px` (predicted standard
+deviation of the centre along the search axis, px) and `saturated` (1: centre of a clipped
+core, taken from the plateau's flanks). Unreadable images, images of another size than the
+calibration and frames without a stripe are reported on stderr; the other images are still
+processed, and the exit status is non-zero if any image failed.
 
 With more than one JAX device (GPUs, several hosts, or CPU devices forced with
 XLA_FLAGS=--xla_force_host_platform_device_count=N), the JAX methods (steger, med) with fixed
@@ -22,18 +24,25 @@ import sys
 NAME = "extract"
 HELP = "stripe centres of images → centre CSV (CM, LA, QA, AA, Steger, MED + Steger)"
 
-METHODS = ("cm", "la", "qa", "aa", "steger", "med")
+METHODS = ("cm", "la", "qa", "aa", "steger", "med", "linked")
+#: Default method: the linked detector (issue 11, evidence in results/robust_extraction.md);
+#: the paper's MED + Steger stays available as --method med (Table 6).
+DEFAULT_METHOD = "linked"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("images", nargs="+", metavar="IMAGE", help="image files (PNG, JPEG, …)")
     parser.add_argument(
-        "--method", choices=METHODS, default="med", help="segmentation method (default: med)"
+        "--method",
+        choices=METHODS,
+        default=DEFAULT_METHOD,
+        help=f"segmentation method (default: {DEFAULT_METHOD}; the paper's: med)",
     )
     parser.add_argument(
         "--space",
-        default="r-g",
-        help="colour space: r, r-g, gray, auto (kurtosis search) or W_R,W_G,W_B (default r-g)",
+        default=None,
+        help="colour space: r, r-g, gray, auto (kurtosis search) or W_R,W_G,W_B "
+        "(default: auto for linked, r-g for the others)",
     )
     parser.add_argument(
         "--stripe",
@@ -67,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     from ..segmentation.colour import parse_space
     from ..sensor import CalibrationError, load_sensor, triangulate
 
+    if args.space is None:
+        args.space = "auto" if args.method == "linked" else "r-g"
     try:
         parse_space(args.space)
     except ValueError as err:
@@ -82,6 +93,9 @@ def run(args: argparse.Namespace) -> int:
     stripes = ("h", "v") if args.stripe == "both" else (args.stripe,)
     sigma = args.sigma if args.sigma is not None else DEFAULT_SIGMA
     header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
+    extras = args.method == "linked"  # optional columns: predicted std (px), clipped core
+    if extras:
+        header += ["sigma_px", "saturated"]
 
     batched = _sharded_path(args)
     failed = 0
@@ -118,6 +132,8 @@ def run(args: argparse.Namespace) -> int:
             found = 0
             for stripe in stripes:
                 kw = {} if args.method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
+                if extras:
+                    kw = {"sigma": args.sigma}
                 try:
                     centres = extract(rgb, args.method, space=args.space, stripe=stripe, **kw)
                 except Exception as err:  # one bad frame must not lose the others
@@ -134,6 +150,11 @@ def run(args: argparse.Namespace) -> int:
                     xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
                     for row, p in zip(rows, xyz, strict=True):
                         row.extend(f"{c:.4f}" for c in p)
+                if extras:
+                    sig = np.asarray(centres.sigma)[ok]
+                    sat = np.asarray(centres.saturated)[ok]
+                    for row, s_px, s_f in zip(rows, sig, sat, strict=True):
+                        row.extend([f"{s_px:.4f}", str(int(s_f))])
                 writer.writerows(rows)
             if found == 0:
                 print(f"cslx extract: {path}: no stripe found", file=sys.stderr)

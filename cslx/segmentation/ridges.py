@@ -27,10 +27,14 @@ the image*. This module finds that curve:
    with one path that starts and ends anywhere (states: K candidates, gap, before, after).
    The reward is capped, so a distractor brighter than the laser does not pay for the jumps
    onto and off it: the longest consistent curve wins.
-4. Refinement and confidence. The chosen candidates keep Steger's sub-pixel position; each
-   gets the predicted standard deviation of that position from the image noise and the
-   Hessian, σ_pos = σ_noise ‖∂g_σ/∂n‖₂ / |r_nn| (first-order error propagation of the Taylor
-   step t = −r_n / r_nn through the noise of r_n), in pixels along the search axis.
+4. Refinement and confidence. The chosen candidates keep Steger's sub-pixel position. A
+   centre farther than `LinkParams.reject_px` from the line through its neighbours (±6
+   columns, itself excluded) is dropped: the other stripe's core at a crossing and split
+   clipped cores. Each centre gets a predicted standard deviation along the search axis,
+   σ_pos = max(σ_noise ‖∂g_σ/∂n‖₂ / |r_nn|, s_path): the first term propagates white pixel
+   noise through Steger's Taylor step t = −r_n / r_nn (per centre); the second is the path's
+   own robust scatter about its local line (MAD of second differences at lag 12, per frame),
+   which also carries the laser speckle and texture that white noise misses.
 
 Pure JAX, jit-compiled, vmap-able over frames (σ, K and the axis are static).
 """
@@ -65,6 +69,8 @@ class LinkParams(NamedTuple):
         gamma: weight of the change of log width between linked candidates.
         gap: cost of one column without a centre inside the path.
         min_length: a path with fewer centres is no stripe.
+        reject_px: a linked centre farther than this (px, along the search axis) from the
+            line through its neighbours (±6 columns) is dropped as an outlier.
     """
 
     z0: float = 5.0
@@ -76,6 +82,7 @@ class LinkParams(NamedTuple):
     gamma: float = 0.5
     gap: float = 0.6
     min_length: int = 12
+    reject_px: float = 1.0
 
 
 class Candidates(NamedTuple):
@@ -216,10 +223,61 @@ def _linked(image, params, *, sigma, axis, k, max_angle_deg):
     median_z = _masked_median(z, valid)
     stripe = (count >= params.min_length) & (median_z >= params.z0)
     valid = valid & stripe
-    pos = jnp.where(valid, take(c.pos), jnp.nan)
+    pos = take(c.pos)
+    # Outliers along the path (the other stripe's core at a crossing, a split clipped core):
+    # a centre farther than `reject_px` from the line fitted to its neighbours is dropped.
+    resid = _local_residual(pos, valid, PATH_HALF_WINDOW)
+    valid = valid & ~(jnp.abs(resid) > params.reject_px)
+    pos = jnp.where(valid, pos, jnp.nan)
     width = jnp.where(valid, take(c.width), jnp.nan)
-    sig = jnp.where(valid, take(c.sigma_px), jnp.nan)
+    # Predicted std: the Hessian term of the white pixel noise, or the scatter of the path
+    # about its local line where larger (speckle and texture move the centre more than sensor
+    # noise; the scatter already contains the white-noise part).
+    scatter = _path_scatter(pos, valid, 2 * PATH_HALF_WINDOW)
+    sig = jnp.where(valid, jnp.maximum(take(c.sigma_px), scatter), jnp.nan)
     return Centres(pos, valid, jnp.where(valid, z, 0.0), sig), width
+
+
+#: Half window (columns) of the local line that judges a centre against its neighbours.
+PATH_HALF_WINDOW = 6
+
+
+def _window_sum(x, h):
+    """Σ of x over j−h..j+h (zero padded), by a cumulative sum."""
+    cs = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(x)])
+    n = x.shape[0]
+    j = jnp.arange(n)
+    return cs[jnp.clip(j + h + 1, 0, n)] - cs[jnp.clip(j - h, 0, n)]
+
+
+def _local_residual(pos, valid, h):
+    """pos − (least-squares line through the valid neighbours j−h..j+h, j itself excluded)."""
+    w = valid.astype(pos.dtype)
+    y = jnp.where(valid, pos, 0.0)
+    x = jnp.arange(pos.shape[0], dtype=pos.dtype)
+    sw = _window_sum(w, h) - w
+    sx = _window_sum(w * x, h) - w * x
+    sy = _window_sum(y, h) - y
+    sxx = _window_sum(w * x * x, h) - w * x * x
+    sxy = _window_sum(y * x, h) - y * x
+    det = sw * sxx - sx * sx
+    ok = (sw >= 4) & (det > 1e-6)
+    safe = jnp.where(ok, det, 1.0)
+    b = (sw * sxy - sx * sy) / safe
+    a = (sy - b * sx) / jnp.where(ok, sw, 1.0)
+    return jnp.where(ok & valid, pos - (a + b * x), 0.0)
+
+
+def _path_scatter(pos, valid, lag):
+    """Robust std of the path about its local line: MAD of pos_j − (pos_{j−L} + pos_{j+L})/2."""
+    n = pos.shape[0]
+    j = jnp.arange(n)
+    lo, hi = jnp.clip(j - lag, 0, n - 1), jnp.clip(j + lag, 0, n - 1)
+    ok = valid & valid[lo] & valid[hi] & (j - lag >= 0) & (j + lag < n)
+    d = jnp.where(ok, pos - 0.5 * (pos[lo] + pos[hi]), 0.0)
+    mad = _masked_median(jnp.abs(d), ok)
+    # Var(d) = 1.5 Var(pos) for independent errors at lag L; MAD → std by 1.4826.
+    return lax.stop_gradient(1.4826 * mad / math.sqrt(1.5))
 
 
 def _masked_median(x, mask):

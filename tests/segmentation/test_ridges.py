@@ -161,3 +161,30 @@ def test_vmap_over_frames_and_candidates_shape():
 def test_stripe_sigma_rule():
     assert stripe_sigma([np.nan] * 3) > 0
     assert stripe_sigma(np.full(50, 10.0)) >= stripe_sigma(np.full(50, 1.0))
+
+
+def test_cli_default_is_linked_with_sigma_column(tmp_path):
+    import csv
+
+    import cv2
+
+    from cslx.cli import main
+
+    rng = np.random.default_rng(8)
+    rgb = _saturated_rgb(rng)
+    good = tmp_path / "stripe.png"
+    blank = tmp_path / "black.png"
+    cv2.imwrite(str(good), rgb[..., ::-1])
+    cv2.imwrite(str(blank), np.zeros_like(rgb))
+    out = tmp_path / "c.csv"
+    code = main(["extract", str(good), str(blank), "--stripe", "h", "--out", str(out)])
+    assert code == 1  # the black frame has no stripe and is reported
+    with open(out) as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["image", "stripe", "u", "v", "sigma_px", "saturated"]
+    body = [r for r in rows[1:] if r[0] == str(good)]
+    assert len(body) > 0.9 * W and not [r for r in rows[1:] if r[0] == str(blank)]
+    v = np.array([float(r[3]) for r in body])
+    assert np.median(np.abs(v - 60.37)) < 0.15
+    assert all(float(r[4]) > 0 for r in body)
+    assert np.mean([r[5] == "1" for r in body]) > 0.9
