@@ -4,7 +4,7 @@
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
-# Single-threaded OpenBLAS: its threaded Cholesky stalls MED's Toeplitz solve (see cslx.cli).
+# Single-threaded OpenBLAS (cslx.environment): its threaded Cholesky stalls MED on 2 cores.
 export OPENBLAS_NUM_THREADS := 1
 
 .PHONY: demo test clean

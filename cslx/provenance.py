@@ -101,10 +101,15 @@ def provenance_md(prov: Mapping[str, Any]) -> str:
 
 
 def write_csv(path: str, rows: Sequence[Mapping[str, Any]], fields: Sequence[str] | None = None):
-    """Write rows of dicts as CSV (columns in the order of `fields` or of the first row)."""
+    """Write rows of dicts as CSV (columns in the order of `fields` or of the first row).
+
+    Written atomically (`cslx.files.atomic_write`): a failure leaves the previous file intact.
+    """
+    from .files import atomic_write
+
     fields = list(fields or (rows[0].keys() if rows else []))
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path, "w", newline="", encoding="utf-8") as f:
+    with atomic_write(path, "w", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
         w.writeheader()
         for r in rows:

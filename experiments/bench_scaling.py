@@ -11,7 +11,7 @@
   of the segment, to convergence).
 - Filter length: cold MED of the horizontal stripe on 640×480 for L from 16 to 480; time,
   fixed-point steps and time per step.
-- Batch size: the archive path (`cslx.segmentation.shard.process_archive` of `cslx.segmentation.interface`
+- Batch size: the archive path (`cslx.segmentation.shard.process_archive` of `extract`
   "med", horizontal stripe) for 1, 4, 16 frames per call, vectorised with vmap or mapped
   frame by frame (`lax.map`, the CPU default of `cslx.segmentation.shard`); frames/s.
 

@@ -127,7 +127,7 @@ def numpy_med_prepare(X: np.ndarray, L: int):
 
 
 def numpy_med_update(W: np.ndarray, pb: dict, loading: float) -> np.ndarray:
-    """One fixed-point step of eqs. (22)–(24) (DESIGN.md correction 5), plain NumPy/SciPy.
+    """One fixed-point step of eqs. (22)–(24) (docs/corrections.md, 5), plain NumPy/SciPy.
 
     B = W ∗ X per segment (full convolution by FFT), U_j, k_j from the centred output,
     R = Toeplitz(Σ_j (k_j/U_j) autocorr(X_j)), b_k = Σ_j U_j⁻² Σ_i b_ij³ X_{i−k,j},
@@ -168,7 +168,7 @@ def gaussian_kernels(sigma: float):
 def opencv_steger(img: np.ndarray, kernels, *, threshold=0.1, snr=5.0, max_offset=0.6):
     """Steger per column with cv2.sepFilter2D derivatives and a NumPy selection (a peer).
 
-    Same closed-form Hessian eigen-decomposition, offset and acceptance as `cslx.segmentation.steger`;
+    Same closed-form Hessian eigen-decomposition, offset and acceptance as `steger`;
     per column the strongest accepted point (argmax), moved to the column along the line.
     """
     import cv2

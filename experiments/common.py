@@ -91,7 +91,7 @@ def round_robin(n_frames: int, seed: int, sensor=None) -> Iterator[tuple[str, st
 
 
 def point_errors(uv: np.ndarray, gt_xyz: np.ndarray, sensor, plane: int):
-    """Per-point 3-D and pixel errors of matched centres: `cslx.segmentation.stripe_point_errors`."""
+    """Per-point 3-D and pixel errors of matched centres (`stripe_point_errors`)."""
     from cslx.segmentation import stripe_point_errors
 
     return stripe_point_errors(uv, gt_xyz, sensor, plane)

@@ -1,7 +1,7 @@
 """Figure 11 of the paper: column waveforms before and after MED, all columns superposed.
 
 The monochrome (R−G) frame's columns are drawn on top of each other, before MED and after it
-(delay-compensated output of `cslx.segmentation.med.med`, horizontal stripe, the paper's L = 50 %): MED
+(delay-compensated output of `med.med`, horizontal stripe, the paper's L = 50 %): MED
 concentrates each column's energy at the stripe. The panels on the right show the
 normalised columns around the true stripe row, to compare widths. Kurtosis (mean sample
 excess kurtosis of the columns) is given before and after.

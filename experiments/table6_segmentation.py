@@ -7,7 +7,7 @@ Steger without MED, and MED / Steger in the kurtosis-chosen integer space (`sear
 chosen per frame and per stripe direction) and in the continuous-weight space
 (`optimise_weights`).
 
-Errors follow DESIGN.md (Metrics): each estimated centre is triangulated with the true
+Errors follow docs/metrics.md: each estimated centre is triangulated with the true
 calibration and compared with the ground-truth 3-D point of its column (row); the errors of
 all frames are pooled. Running time is the median wall time of one `cslx.segmentation.interface`
 call on a 640×480 RGB frame (colour conversion included), after warm-up, with the first

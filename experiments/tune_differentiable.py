@@ -18,7 +18,7 @@ The differentiable surrogate (`soft_centres`, `surrogate_loss`) differs from the
 pipeline in three ways, each needed for a useful gradient:
 
 1. MED is unrolled for a fixed number of fixed-point steps of eqs. (22)–(24)
-   (`cslx.segmentation.med.med_update`) from Table 2's flat start instead of iterated to the tolerance;
+   (`med.med_update`) from Table 2's flat start instead of iterated to the tolerance;
    the gradient flows through every Cholesky solve and the delay estimate.
 2. Steger's Gaussian derivatives use taps computed from a traced σ on a fixed support
    (4 σ_max), not the static scipy-exact kernel.

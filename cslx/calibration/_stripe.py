@@ -1,6 +1,6 @@
-"""A simple stripe-centre extractor for laser-plane calibration (a stand-in for `cslx.segmentation.extract`).
+"""A simple stripe-centre extractor for laser-plane calibration (no Steger, no MED).
 
-Used by `cslx.calibration` when `cslx.segmentation.extract` is not available. The calibration images are
+Used by `cslx.calibration` with `method="simple"`. The calibration images are
 well lit boards with a bright red stripe, so a plain detector suffices:
 
 1. I = R − G (a red laser on a grey board), Gaussian-smoothed (σ px), zero outside a mask;

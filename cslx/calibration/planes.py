@@ -305,7 +305,8 @@ def calibrate_planes(
         calib: camera calibration whose view i shows the same pose as `laser_images[i]`.
         laser_images: (H, W, 3) uint8 RGB frames (or paths) with the laser on.
         pattern, square: the board (inner corners (cols, rows), square side).
-        method: "simple" (`cslx._calib_stripe`), a `cslx.segmentation.extract.extract` method, or "auto".
+        method: "simple" (`cslx.calibration._stripe`), a `cslx.segmentation.extract` method,
+            or "auto".
         extent: how far the board reaches beyond the inner corners, in squares (1: the
             outer row of squares; points beyond may fall off the board).
         margin: band inside that border to ignore, in squares.

@@ -2,7 +2,11 @@
 
 Each subcommand lives in its own module in this package and defines `NAME`, `HELP`,
 `add_arguments(parser)` and `run(args) -> int`. Modules import JAX lazily inside `run`, so
-`cslx --help` stays fast.
+`cslx --help` stays fast, and check their arguments before any work.
+
+Exit status: 0 success, 1 some input failed (reported on stderr), 2 a usage error (a bad
+argument, a missing or unusable input or output path: one line saying which and what to
+do), 130 interrupted. Named outputs are written atomically (`cslx.files`).
 """
 
 from __future__ import annotations
@@ -43,11 +47,16 @@ def main(argv: list[str] | None = None) -> int:
     from ..environment import configure
 
     configure()
+    from ..files import OutputPathError
+
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except OutputPathError as e:  # an output path found unwritable inside a command
+        print(f"cslx {args.command}: {e}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

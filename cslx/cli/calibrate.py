@@ -6,7 +6,7 @@ with the plain images in sorted file-name order) give both laser planes; a CSV o
 points known in both frames (--robot-points, header x_c,y_c,z_c,x_r,y_r,z_r, mm) gives R_cr
 and T_cr by a rigid fit (without it, R_cr = I and T_cr = 0 and the file says so).
 
-The calibration file must hold both planes (DESIGN.md), so --laser-images is required; with
+The calibration file must hold both planes (docs/contracts.md), so --laser-images is required; with
 --camera-only the command writes the intrinsics alone, with "camera_only": true and no
 planes, which `cslx.sensor.load_sensor` will refuse. Images without a detectable board are
 listed and skipped. A summary table goes to stdout.
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.laser_images and not args.camera_only:
         return _fail(
             "--laser-images is required: the calibration file must hold both laser planes "
-            "(DESIGN.md); pass --camera-only to write the intrinsics alone"
+            "(docs/contracts.md); pass --camera-only to write the intrinsics alone"
         )
     images = _list_images(args.images)
     if not images:

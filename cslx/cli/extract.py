@@ -3,31 +3,48 @@
 Writes one row per centre with header `image,stripe,u,v` (plus `x,y,z` in mm, camera frame,
 when --calib is given): stripe `h` has at most one centre per image column, stripe `v` at
 most one per image row; pixel coordinates are OpenCV's (origin at the centre of the top-left
-pixel). The default method "linked" adds the optional columns `sigma_px` (predicted standard
-deviation of the centre along the search axis, px) and `saturated` (1: centre of a clipped
-core, taken from the plateau's flanks). Unreadable images, images of another size than the
-calibration and frames without a stripe are reported on stderr; the other images are still
-processed, and the exit status is non-zero if any image failed.
+pixel). Arguments are checked before any work: a missing image, a directory given as an
+image, a bad --sigma or an unwritable --out is a usage error (exit 2). Unreadable images,
+images of another size than the calibration and frames without a stripe are reported on
+stderr; the other images are still processed, and the exit status is 1 if any image failed.
+The CSV is written atomically (`cslx.files`): it appears complete or not at all, and a run
+in which every image failed leaves no file (a previous one stays as it was). On success one
+summary line gives the images, the centres per stripe and the colour weights used (the ones
+`--space auto` chose).
+
+The default method "linked" (issue 11: candidate ridges linked along the stripe, clipped cores,
+width-aware σ; evidence in results/robust_extraction.md) adds the optional columns `sigma_px`
+(predicted standard deviation of the centre along the search axis, px) and `saturated` (1: the
+centre of a clipped core, taken from the plateau's flanks). The paper's MED + Steger is
+`--method med` (Table 6).
+
+Images are decoded in a thread pool ahead of the compute (OpenCV releases the GIL), and the
+rows of each image are formatted in one call, so that reading and writing overlap the
+segmentation instead of adding to it.
 
 With more than one JAX device (GPUs, several hosts, or CPU devices forced with
 XLA_FLAGS=--xla_force_host_platform_device_count=N), the JAX methods (steger, med) with fixed
-colour weights process the images in batches sharded over all devices (`cslx.segmentation.shard`).
+colour weights process the images in batches sharded over all devices
+(`cslx.segmentation.shard`).
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
+import math
 import os
 import sys
+import time
 
 NAME = "extract"
 HELP = "stripe centres of images → centre CSV (CM, LA, QA, AA, Steger, MED + Steger)"
 
 METHODS = ("cm", "la", "qa", "aa", "steger", "med", "linked")
-#: Default method: the linked detector (issue 11, evidence in results/robust_extraction.md);
-#: the paper's MED + Steger stays available as --method med (Table 6).
+#: Default method: the linked detector (`cslx.segmentation.robust`, issue 11).
 DEFAULT_METHOD = "linked"
+#: Images decoded ahead of the one being segmented, and the decoding threads.
+READ_AHEAD = 8
+READ_THREADS = 2
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,10 +68,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="horizontal (h), vertical (v) or both stripes of the cross (default both)",
     )
     parser.add_argument(
-        "--sigma", type=float, default=None, help="Steger's Gaussian scale in pixels (default 2)"
+        "--sigma",
+        type=float,
+        default=None,
+        help="Steger's Gaussian scale in pixels, > 0 (default 2 for steger and med; linked: "
+        "from the measured stripe width)",
     )
     parser.add_argument("--calib", metavar="FILE", help="calibration JSON: adds x,y,z in mm")
     parser.add_argument("--out", metavar="FILE.csv", required=True, help="centre CSV to write")
+
+
+def _usage_error(msg: str) -> int:
+    print(f"cslx extract: {msg}", file=sys.stderr)
+    return 2
+
+
+def check_images(paths: list[str]) -> str | None:
+    """The first problem with the image paths (missing, a directory), or None."""
+    for path in paths:
+        if os.path.isdir(path):
+            return f"{path}: is a directory; give the image files in it (e.g. {path}/*.png)"
+        if not os.path.exists(path):
+            return f"{path}: no such file; check the path"
+    return None
 
 
 def _read_rgb(path: str):
@@ -68,105 +104,261 @@ def _read_rgb(path: str):
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
-def run(args: argparse.Namespace) -> int:
-    import numpy as np
-    from tqdm import tqdm
+def read_ahead(paths, ahead: int = READ_AHEAD, threads: int = READ_THREADS):
+    """Yield (path, RGB image or the OSError) in order, decoding up to `ahead` in threads."""
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
 
-    from ..segmentation import DEFAULT_SIGMA, centres_to_pixels, extract
+    def read(path):
+        try:
+            return _read_rgb(path)
+        except OSError as err:
+            return err
+
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="cslx-read") as pool:
+        queue: deque = deque()
+        it = iter(paths)
+        for path in it:
+            queue.append((path, pool.submit(read, path)))
+            if len(queue) >= ahead:
+                break
+        while queue:
+            path, fut = queue.popleft()
+            nxt = next(it, None)
+            if nxt is not None:
+                queue.append((nxt, pool.submit(read, nxt)))
+            yield path, fut.result()
+
+
+def _csv_field(text: str) -> str:
+    """`text` as one CSV field (quoted when it holds a comma, quote or line break)."""
+    if any(c in text for c in ',"\r\n'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def format_rows(path: str, stripe: str, uv, xyz=None, extra=None) -> str:
+    """The CSV rows of one image's centres, `image,stripe,u,v[,x,y,z]`, in one string.
+
+    Equal, byte for byte, to `csv.writer` rows of `f"{value:.4f}"` fields (lines end in
+    CRLF like `csv.writer`'s), but formatted with one `%` call for the whole block.
+    """
+    import numpy as np
+
+    uv = np.asarray(uv, float)
+    if len(uv) == 0:
+        return ""
+    cols = [uv] if xyz is None else [uv, np.asarray(xyz, float)]
+    values = np.concatenate(cols, axis=1)
+    prefix = f"{_csv_field(path)},{stripe},".replace("%", "%%")
+    fields = ["%.4f"] * values.shape[1]
+    if extra is not None:  # linked: sigma_px (%.4f) and saturated (0/1)
+        values = np.concatenate([values, np.asarray(extra, float)], axis=1)
+        fields += ["%.4f", "%d"]
+    line = prefix + ",".join(fields) + "\r\n"
+    return (line * len(values)) % tuple(values.ravel().tolist())
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..files import output_problem
+
+    # ---- arguments, before any work (and before JAX loads)
+    if args.sigma is not None and not (math.isfinite(args.sigma) and args.sigma > 0):
+        return _usage_error(
+            f"--sigma {args.sigma}: must be a positive number of pixels (Steger's scale, e.g. 2)"
+        )
+    problem = check_images(args.images)
+    if problem:
+        return _usage_error(problem)
+    why = output_problem(args.out)
+    if why:
+        return _usage_error(f"--out {args.out}: {why}")
+    out_real = os.path.realpath(args.out)
+    if any(os.path.realpath(p) == out_real for p in args.images):
+        return _usage_error(f"--out {args.out}: is one of the input images; choose another name")
     from ..segmentation.colour import parse_space
-    from ..sensor import CalibrationError, load_sensor, triangulate
 
     if args.space is None:
         args.space = "auto" if args.method == "linked" else "r-g"
     try:
-        parse_space(args.space)
+        space = parse_space(args.space)
     except ValueError as err:
-        print(f"cslx extract: {err}", file=sys.stderr)
-        return 2
+        return _usage_error(str(err))
+    stripes = ("h", "v") if args.stripe == "both" else (args.stripe,)
     sensor = None
     if args.calib:
+        from ..sensor import CalibrationError, load_sensor
+
         try:
             sensor = load_sensor(args.calib)
         except (OSError, CalibrationError) as err:
-            print(f"cslx extract: calibration {args.calib}: {err}", file=sys.stderr)
-            return 2
-    stripes = ("h", "v") if args.stripe == "both" else (args.stripe,)
-    sigma = args.sigma if args.sigma is not None else DEFAULT_SIGMA
-    header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
-    extras = args.method == "linked"  # optional columns: predicted std (px), clipped core
-    if extras:
-        header += ["sigma_px", "saturated"]
+            return _usage_error(f"calibration {args.calib}: {err}")
+        n_planes = len(sensor.planes)
+        for s in stripes:
+            if (0 if s == "h" else 1) >= n_planes:
+                return _usage_error(
+                    f"calibration {args.calib} has {n_planes} laser plane(s), none for stripe "
+                    f"{s}; use --stripe h, or a calibration with both planes"
+                )
+    return _extract(args, space, stripes, sensor)
 
+
+class _NothingWritten(Exception):
+    """Every image failed: abandon the atomic output so that no file appears."""
+
+
+def _extract(args, space, stripes, sensor) -> int:
+    import numpy as np
+    from tqdm import tqdm
+
+    from ..files import atomic_write
+    from ..segmentation import DEFAULT_SIGMA
+
+    linked = args.method == "linked"
+    sigma = args.sigma if args.sigma is not None or linked else DEFAULT_SIGMA
+    header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
+    header += ["sigma_px", "saturated"] if linked else []
+    stats = _Stats(stripes)
+    t0 = time.perf_counter()
     batched = _sharded_path(args)
-    failed = 0
     try:
-        out = open(args.out, "w", newline="")
+        with atomic_write(args.out, "w", newline="") as out:
+            out.write(",".join(header) + "\r\n")
+            images = tqdm(
+                read_ahead(args.images),
+                total=len(args.images),
+                unit="img",
+                disable=len(args.images) < 10,
+                file=sys.stderr,
+                leave=False,
+            )
+            for path, rgb in images:
+                if isinstance(rgb, OSError):
+                    stats.fail(path, f"{rgb}; skipped")
+                    continue
+                h, w = rgb.shape[:2]
+                if sensor is not None and tuple(sensor.camera.image_size) != (w, h):
+                    cw, ch = sensor.camera.image_size
+                    stats.fail(
+                        path, f"image is {w}×{h} but the calibration is for {cw}×{ch}; skipped"
+                    )
+                    continue
+                if batched is not None:
+                    batched.append((path, rgb))
+                    if len(batched) >= _BATCH_PER_DEVICE * batched.n_devices:
+                        _flush(batched, stripes, args, sigma, sensor, out, stats)
+                    continue
+                _one_image(path, rgb, stripes, args.method, space, sigma, sensor, out, stats)
+            if batched:
+                _flush(batched, stripes, args, sigma, sensor, out, stats)
+            if stats.ok == 0:
+                raise _NothingWritten
+    except _NothingWritten:
+        print(
+            f"cslx extract: none of the {len(args.images)} images gave a stripe; "
+            f"{args.out} not written",
+            file=sys.stderr,
+        )
+        return 1
     except OSError as err:
         print(f"cslx extract: cannot write {args.out}: {err}", file=sys.stderr)
-        return 2
-    with out:
-        writer = csv.writer(out)
-        writer.writerow(header)
-        images = tqdm(args.images, unit="img", disable=len(args.images) < 10, file=sys.stderr)
-        for path in images:
-            try:
-                rgb = _read_rgb(path)
-            except OSError as err:
-                print(f"cslx extract: {path}: {err}; skipped", file=sys.stderr)
-                failed += 1
-                continue
-            h, w = rgb.shape[:2]
-            if sensor is not None and tuple(sensor.camera.image_size) != (w, h):
-                print(
-                    f"cslx extract: {path}: image is {w}×{h} but the calibration is for "
-                    f"{sensor.camera.image_size[0]}×{sensor.camera.image_size[1]}; skipped",
-                    file=sys.stderr,
-                )
-                failed += 1
-                continue
-            if batched is not None:
-                batched.append((path, rgb))
-                if len(batched) >= _BATCH_PER_DEVICE * batched.n_devices:
-                    failed += _flush(batched, stripes, args, sigma, sensor, writer)
-                continue
-            found = 0
-            for stripe in stripes:
-                kw = {} if args.method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
-                if extras:
-                    kw = {"sigma": args.sigma}
-                try:
-                    centres = extract(rgb, args.method, space=args.space, stripe=stripe, **kw)
-                except Exception as err:  # one bad frame must not lose the others
-                    print(f"cslx extract: {path}: stripe {stripe}: {err}", file=sys.stderr)
-                    continue
-                uv = centres_to_pixels(centres, stripe)
-                ok = np.all(np.isfinite(uv), axis=1)
-                uv = uv[ok]
-                found += len(uv)
-                if len(uv) == 0:
-                    continue
-                rows = [[path, stripe, f"{u:.4f}", f"{v:.4f}"] for u, v in uv]
-                if sensor is not None:
-                    xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
-                    for row, p in zip(rows, xyz, strict=True):
-                        row.extend(f"{c:.4f}" for c in p)
-                if extras:
-                    sig = np.asarray(centres.sigma)[ok]
-                    sat = np.asarray(centres.saturated)[ok]
-                    for row, s_px, s_f in zip(rows, sig, sat, strict=True):
-                        row.extend([f"{s_px:.4f}", str(int(s_f))])
-                writer.writerows(rows)
-            if found == 0:
-                print(f"cslx extract: {path}: no stripe found", file=sys.stderr)
-                failed += 1
-        if batched:
-            failed += _flush(batched, stripes, args, sigma, sensor, writer)
-    if failed:
-        print(f"cslx extract: {failed} of {len(args.images)} images failed", file=sys.stderr)
-    return 1 if failed else 0
+        return 1
+    dt = time.perf_counter() - t0
+    n = len(args.images)
+    per = ", ".join(
+        f"{s} {np.median(stats.centres[s]) if stats.centres[s] else 0:.0f}" for s in stripes
+    )
+    print(
+        f"cslx extract: {stats.ok} of {n} images → {args.out}; centres per image (median) "
+        f"{per}; colour weights {stats.weights_text(args.space)}; "
+        f"{dt:.1f} s ({1e3 * dt / n:.1f} ms/image)",
+        file=sys.stderr,
+    )
+    if stats.failed:
+        print(f"cslx extract: {stats.failed} of {n} images failed", file=sys.stderr)
+    return 1 if stats.failed else 0
 
 
-# ---------------------------------------------------------------- several devices (cslx.segmentation.shard)
+class _Stats:
+    """What the run produced: images with centres, failures, centres and weights per stripe."""
+
+    def __init__(self, stripes):
+        self.ok = 0
+        self.failed = 0
+        self.centres = {s: [] for s in stripes}
+        self.weights = {s: [] for s in stripes}
+
+    def fail(self, path: str, why: str) -> None:
+        print(f"cslx extract: {path}: {why}", file=sys.stderr)
+        self.failed += 1
+
+    def weights_text(self, space: str) -> str:
+        import numpy as np
+
+        parts = []
+        for s, ws in self.weights.items():
+            if ws:
+                w = np.median(np.asarray(ws, float), axis=0)
+                parts.append(f"{s} ({w[0]:.3f}, {w[1]:.3f}, {w[2]:.3f})")
+        text = ", ".join(parts) if parts else "none"
+        if space.strip().lower() == "auto":
+            return f"chosen by auto (median over images): {text}"
+        return f"{space}: {text}"
+
+
+def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats) -> None:
+    import numpy as np
+
+    from ..segmentation import centres_to_pixels, extract
+    from ..segmentation.interface import monochrome_for
+
+    found = 0
+    for stripe in stripes:
+        kw = {} if method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
+        try:
+            if method == "linked":  # needs the RGB frame (clipped pixels)
+                from ..segmentation.robust import search_space_unclipped
+
+                weights = space
+                if space == "auto":
+                    weights = search_space_unclipped(rgb, 0 if stripe == "h" else 1)
+                centres = extract(rgb, method, space=weights, stripe=stripe, **kw)
+            else:
+                mono, weights = monochrome_for(rgb, space, stripe)
+                centres = extract(mono, method, stripe=stripe, **kw)
+        except Exception as err:  # one bad frame must not lose the others
+            print(f"cslx extract: {path}: stripe {stripe}: {err}", file=sys.stderr)
+            continue
+        stats.weights[stripe].append(np.asarray(weights, float))
+        uv = centres_to_pixels(centres, stripe)
+        ok = np.all(np.isfinite(uv), axis=1)
+        uv = uv[ok]
+        extra = None
+        if centres.sigma is not None and method == "linked":
+            extra = np.stack([np.asarray(centres.sigma), np.asarray(centres.saturated)], 1)[ok]
+        stats.centres[stripe].append(len(uv))
+        found += len(uv)
+        _write_block(out, path, stripe, uv, sensor, extra)
+    if found == 0:
+        stats.fail(path, "no stripe found")
+    else:
+        stats.ok += 1
+
+
+def _write_block(out, path, stripe, uv, sensor, extra=None) -> None:
+    import numpy as np
+
+    if len(uv) == 0:
+        return
+    xyz = None
+    if sensor is not None:
+        from ..sensor import triangulate
+
+        xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
+    out.write(format_rows(path, stripe, uv, xyz, extra))
+
+
+# ------------------------------------------- several devices (cslx.segmentation.shard)
 _BATCH_PER_DEVICE = 16
 
 
@@ -200,16 +392,17 @@ def _sharded_path(args: argparse.Namespace) -> _Pending | None:
     return pending
 
 
-def _flush(pending: _Pending, stripes, args, sigma, sensor, writer) -> int:
-    """Centres of the pending images with `cslx.segmentation.shard.extract_batch`; rows in input order."""
+def _flush(pending: _Pending, stripes, args, sigma, sensor, out, stats) -> None:
+    """Centres of the pending images (`cslx.segmentation.shard.extract_batch`), in input order."""
     import numpy as np
 
     from ..segmentation import centres_to_pixels
+    from ..segmentation.colour import parse_space
     from ..segmentation.shard import extract_batch
     from ..segmentation.steger import Centres
-    from ..sensor import triangulate
 
-    rows: dict[int, list] = {i: [] for i in range(len(pending))}
+    weights = np.asarray(parse_space(args.space), float)
+    blocks: dict[int, list] = {i: [] for i in range(len(pending))}
     by_shape: dict[tuple, list[int]] = {}
     for i, (_, rgb) in enumerate(pending):
         by_shape.setdefault(rgb.shape, []).append(i)
@@ -227,19 +420,14 @@ def _flush(pending: _Pending, stripes, args, sigma, sensor, writer) -> int:
             for k, i in enumerate(idx):
                 uv = centres_to_pixels(Centres(c.pos[k], c.valid[k], c.strength[k]), stripe)
                 uv = uv[np.all(np.isfinite(uv), axis=1)]
-                path = pending[i][0]
-                new = [[path, stripe, f"{u:.4f}", f"{v:.4f}"] for u, v in uv]
-                if sensor is not None and len(uv):
-                    xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
-                    for row, p in zip(new, xyz, strict=True):
-                        row.extend(f"{q:.4f}" for q in p)
-                rows[i].extend(new)
-    failed = 0
+                stats.centres[stripe].append(len(uv))
+                stats.weights[stripe].append(weights)
+                blocks[i].append((stripe, uv))
     for i, (path, _) in enumerate(pending):
-        if rows[i]:
-            writer.writerows(rows[i])
+        if any(len(uv) for _, uv in blocks[i]):
+            for stripe, uv in blocks[i]:
+                _write_block(out, path, stripe, uv, sensor)
+            stats.ok += 1
         else:
-            print(f"cslx extract: {path}: no stripe found", file=sys.stderr)
-            failed += 1
+            stats.fail(path, "no stripe found")
     pending.clear()
-    return failed

@@ -1,11 +1,13 @@
-"""Render scenes with exact ground truth (DESIGN.md, Contracts: rendered data).
+"""Render scenes with exact ground truth (docs/contracts.md, rendered data).
 
 Writes PNG frames, the true calibration as DIR/sensor.json and DIR/gt.npz holding, with a
 leading frame axis in the order of `frames`, `h_v` (F, W), `h_xyz` (F, W, 3), `v_u` (F, H),
 `v_xyz` (F, H, 3) (NaN where a stripe is absent) plus the robot poses and the true weld
 lines. `--scene calibration` writes checkerboard images without (`plain_*.png`) and with
 (`laser_*.png`) the laser and the true board poses `R`, `t`, `object_points`,
-`image_points`. The same arguments always give the same bytes.
+`image_points`. The same arguments always give the same bytes. The data set is written
+atomically (`cslx.files.atomic_directory`, `gt.npz` last): an interrupted run changes
+nothing in DIR.
 """
 
 from __future__ import annotations
@@ -54,20 +56,41 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _usage_error(msg: str) -> int:
+    print(f"cslx render: {msg}", file=sys.stderr)
+    return 2
+
+
+def check_arguments(args: argparse.Namespace) -> str | None:
+    """The first problem with the arguments (before JAX loads), or None."""
+    import math
+
+    from ..files import OutputPathError, check_output_dir
+
+    if args.frames < 1:
+        return f"--frames {args.frames}: must be at least 1"
+    if args.power is not None and not (math.isfinite(args.power) and args.power > 0):
+        return f"--power {args.power}: must be a positive number (peak red DN, e.g. 230)"
+    try:
+        check_output_dir(args.out)
+    except OutputPathError as e:
+        return f"--out {e}"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
+    problem = check_arguments(args)
+    if problem:
+        return _usage_error(problem)
     import numpy as np
 
     from .. import sim as synth
     from ..sensor import CalibrationError, default_sensor, load_sensor
 
-    if args.frames < 1:
-        print("cslx render: --frames must be at least 1", file=sys.stderr)
-        return 2
     try:
         sensor = load_sensor(args.calib) if args.calib else default_sensor()
     except CalibrationError as e:
-        print(f"cslx render: {e}", file=sys.stderr)
-        return 2
+        return _usage_error(str(e))
     t0 = time.perf_counter()
     if args.scene == "calibration":
         cal = synth.render_calibration(sensor, args.frames, args.seed, progress=True)

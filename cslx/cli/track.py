@@ -1,9 +1,9 @@
 """Track a weld from a camera, a video file or a directory of PNG frames, and drive the robot.
 
-Each frame goes through the compiled tracker (`cslx.runtime.tracker.Tracker`): the observation and the
+Each frame goes through the compiled tracker (`cslx.runtime.Tracker`): the observation and the
 path controller's velocity command (`cslx.runtime.PathController`) are sent to the robot over
 the serial link (`cslx.runtime.RobotLink`, binary protocol of cslx/robot/PROTOCOL.md) unless
---dry-run is given. With --log, every frame read gets one CSV row (DESIGN.md "Tracking log":
+--dry-run is given. With --log, every frame read gets one CSV row (docs/contracts.md tracking log:
 frame,source,t_s,offset_mm,heading_deg,bead_width_mm,bead_height_mm,junction,junction_x_mm,
 confidence,latency_ms, then extra columns); a frame that cannot be decoded still gets a row
 with confidence 0. A status line (fps, offset, confidence) is kept on stderr. Ctrl-C sends

@@ -163,7 +163,7 @@ class PathController:
         Args:
             dt: time since the previous update, s (> 0).
             offset_mm, heading_deg, confidence, junction, junction_x_mm: the observation
-                (DESIGN.md tracking-log meanings; NaN = unknown).
+                (docs/contracts.md tracking log meanings; NaN = unknown).
             robot_heading_rad: measured robot heading (odometry), used to end the TURN;
                 without it the commanded ω is integrated.
         """

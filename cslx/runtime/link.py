@@ -6,7 +6,9 @@ a pty path, `loop://`, `socket://…`) and runs two threads:
 - **I/O thread**: reads and decodes incoming frames (ACK, ROBOT_STATE, …), keeps the latest
   robot state, and on an I/O error (port gone, pty closed) closes the port and reopens it
   with exponential backoff (`reconnect_min_s` … `reconnect_max_s`) — the process survives;
-  writes while disconnected return None and are counted.
+  writes while disconnected return None and are counted. The first frame after a reconnect
+  is STOP(LINK_ERROR). A message the protocol cannot encode is refused (`ProtocolError`,
+  counted as `encode_errors`) without resetting the port.
 - **Watchdog thread**: sends HEARTBEAT every `heartbeat_period_s`, and sends STOP when the
   vision loop has not called `feed()` / `send_observation()` for `stall_timeout_s`
   (StopReason.VISION_STALL) or the fed confidence stayed below `min_confidence` for
@@ -32,6 +34,7 @@ from .protocol import (
     Heartbeat,
     Message,
     Observation,
+    ProtocolError,
     RobotState,
     Stop,
     StopReason,
@@ -102,10 +105,15 @@ class RobotLink:
         self.latest_state_time: float | None = None
         #: STOPs sent: (monotonic time, StopReason)
         self.stops_sent: list[tuple[float, StopReason]] = []
-        self.stats = dict(sent=0, send_failures=0, suppressed=0, reconnects=0, io_errors=0)
+        self.stats = dict(
+            sent=0, send_failures=0, suppressed=0, reconnects=0, io_errors=0, encode_errors=0
+        )
 
     # connection ------------------------------------------------------------------------------
-    def _connect(self) -> bool:
+    def _connect(self, reconnect: bool = False) -> bool:
+        """Open the port. After a loss (`reconnect`), STOP(LINK_ERROR) is the first frame
+        written, before any other thread can send: the robot may have missed commands and
+        must not act on stale ones; the next command resumes motion."""
         import serial  # lazy: the runtime shell owns I/O, importing cslx must not need it
 
         try:
@@ -118,6 +126,8 @@ class RobotLink:
         with self._io_lock:
             self._ser = ser
             self._decoder.reset()
+            if reconnect:
+                self.send_stop(StopReason.LINK_ERROR)
         return True
 
     def _drop(self, why: str) -> None:
@@ -179,20 +189,39 @@ class RobotLink:
 
     # sending ---------------------------------------------------------------------------------
     def send(self, message: Message) -> int | None:
-        """Frame and write one message; its sequence number, or None if the link is down."""
+        """Frame and write one message; its sequence number, or None if the link is down.
+
+        A message the protocol cannot carry (`ProtocolError`: a float beyond float32, a
+        non-finite command, an out-of-range code) is refused and counted
+        (`stats["encode_errors"]`) without touching the port: it is the caller's bug, not a
+        link fault. A refused VELOCITY_COMMAND is replaced by STOP(FAULT), since the robot
+        must not keep driving on the previous command.
+        """
         with self._io_lock:
             seq = self._seq
-            self._seq = (self._seq + 1) % 65536
-            ser = self._ser
-            if ser is None:
-                self.stats["send_failures"] += 1
-                return None
             try:
-                ser.write(encode(message, seq))
-            except Exception as e:  # noqa: BLE001 — pyserial raises several types here
-                self.stats["send_failures"] += 1
-                self._drop(f"write failed: {e}")
-                return None
+                frame = encode(message, seq)
+            except ProtocolError as e:
+                refused = e
+            else:
+                refused = None
+                self._seq = (self._seq + 1) % 65536
+                ser = self._ser
+                if ser is None:
+                    self.stats["send_failures"] += 1
+                    return None
+                try:
+                    ser.write(frame)
+                except Exception as e:  # noqa: BLE001 — pyserial raises several types here
+                    self.stats["send_failures"] += 1
+                    self._drop(f"write failed: {e}")
+                    return None
+        if refused is not None:
+            self.stats["encode_errors"] += 1
+            log.error("not sent: %s", refused)
+            if isinstance(message, VelocityCommand):
+                self.send_stop(StopReason.FAULT)
+            return None
         self.stats["sent"] += 1
         return seq
 
@@ -293,10 +322,10 @@ class RobotLink:
         while self._running.is_set():
             ser = self._ser
             if ser is None:
-                if self._connect():
+                if self._connect(reconnect=True):
                     self.stats["reconnects"] += 1
                     backoff = self.reconnect_min_s
-                    log.warning("robot link %s re-established", self.port)
+                    log.warning("robot link %s re-established: STOP(LINK_ERROR) sent", self.port)
                     if self._tripped is not None:
                         self.send_stop(self._tripped)
                 else:

@@ -1,11 +1,11 @@
 """The whole per-frame pipeline in one compiled function: RGB frame → stripes → 3-D → weld.
 
-One frame (DESIGN.md, "Pipeline"):
+One frame (docs/architecture.md):
 
 1. colour space, eq. (8): I = w_r R + w_g G + w_b B (static weights, R − G by default);
 2. MED, eqs. (18)–(24): one FIR filter down the columns (horizontal stripe) and one along
    the rows (vertical stripe), each warm-started from the previous frame's filter held in
-   `PipelineState` (DESIGN.md correction 5), delay-compensated (correction 6);
+   `PipelineState` (docs/corrections.md, 5), delay-compensated (correction 6);
 3. Steger's detector on each MED output: one sub-pixel centre per column / per row;
 4. triangulation (correction 3 of eq. (27)) on plane 0 / plane 1 into the robot frame;
 5. weld features (`cslx.runtime.weld.weld_features`): the followed bead on the horizontal stripe,

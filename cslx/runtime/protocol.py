@@ -14,14 +14,23 @@ rejected before its CRC is read, so a corrupted length can never make the decode
 good frame that follows. The streaming `Decoder` resynchronises on the next sync word after
 garbage, truncated or corrupted frames and counts what it dropped (`DecoderStats`).
 
-Pure Python (struct), no numerics, no I/O.
+Field domains are checked on both sides (`_Message.check`): the encoder raises
+`ProtocolError` for a value the wire cannot carry (a float beyond float32, a non-finite
+command or heartbeat time, an integer out of its field's range, an undefined
+VELOCITY_COMMAND mode or ACK status); the decoder drops a CRC-valid frame with an undefined
+mode or status or a flag byte other than 0/1 (`bad_payload`), so an undefined mode is
+never executed.
+
+Standard library only (struct, binascii), no numerics, no I/O.
 """
 
 from __future__ import annotations
 
+import binascii
 import dataclasses
 import enum
 import math
+import operator
 import struct
 from typing import ClassVar
 
@@ -60,27 +69,14 @@ class ProtocolError(ValueError):
     """A message that cannot be encoded or a frame that cannot be decoded."""
 
 
-def _crc_table() -> tuple[int, ...]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-        table.append(crc & 0xFFFF)
-    return tuple(table)
-
-
-_CRC_TABLE = _crc_table()
-
-
 def crc16_ccitt_false(data: bytes, crc: int = 0xFFFF) -> int:
     """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor.
 
-    Check value: crc16_ccitt_false(b"123456789") == 0x29B1.
+    Check value: crc16_ccitt_false(b"123456789") == 0x29B1. Computed by the standard
+    library's `binascii.crc_hqx` (the same polynomial, unreflected, with a given initial
+    value), in C; the tests compare it with a bit-at-a-time reference.
     """
-    for b in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _CRC_TABLE[((crc >> 8) ^ b) & 0xFF]
-    return crc
+    return binascii.crc_hqx(data, crc)
 
 
 class MessageType(enum.IntEnum):
@@ -93,31 +89,80 @@ class MessageType(enum.IntEnum):
 
 
 class StopReason(enum.IntEnum):
-    """Why a STOP was sent."""
+    """Why a STOP was sent. A STOP with a code not listed here still stops the robot."""
 
     OPERATOR = 0  # clean shutdown, Ctrl-C, explicit stop
     VISION_STALL = 1  # the vision loop stopped feeding the watchdog
     LOW_CONFIDENCE = 2  # confidence stayed below the threshold too long
-    LINK_ERROR = 3  # the vision side lost / re-established the link
+    LINK_ERROR = 3  # RobotLink lost the port and re-opened it (sent first after reconnecting)
     COMMAND_TIMEOUT = 4  # robot side: no command or heartbeat in time
     JUNCTION = 5  # controller asked to stop at a junction
     FAULT = 6  # anything else
+
+
+_F32_MAX = 3.4028234663852886e38  # largest finite float32
+_INT_RANGE = {"B": (0, 0xFF), "H": (0, 0xFFFF)}
 
 
 @dataclasses.dataclass(frozen=True)
 class _Message:
     TYPE: ClassVar[MessageType]
     FORMAT: ClassVar[struct.Struct]
+    #: float fields the encoder requires finite (elsewhere NaN means "unknown"); the decoder
+    #: passes non-finite values on, so that the receiver can react (the robot stops: FAULT)
+    FINITE: ClassVar[tuple[str, ...]] = ()
+    #: integer fields restricted to a set of defined values
+    CHOICES: ClassVar[dict[str, tuple[int, ...]]] = {}
+
+    def check(self, sending: bool = True) -> str | None:
+        """What makes this message impossible to send (or, with sending=False, to accept)."""
+        codes = self.FORMAT.format.lstrip("<>=!@")
+        for field, code in zip(dataclasses.fields(self), codes, strict=True):
+            value = getattr(self, field.name)
+            if code in "fd":
+                try:
+                    x = float(value)
+                except (TypeError, ValueError):
+                    return f"{field.name} = {value!r} is not a number"
+                if sending and field.name in self.FINITE and not math.isfinite(x):
+                    return f"{field.name} = {x} must be finite"
+                if code == "f" and math.isfinite(x) and abs(x) > _F32_MAX:
+                    return f"{field.name} = {x} is beyond the float32 range (±3.4e38)"
+            else:
+                try:
+                    n = operator.index(value)  # int, bool, IntEnum, NumPy integers
+                except TypeError:
+                    return f"{field.name} = {value!r} is not an integer"
+                lo, hi = _INT_RANGE[code]
+                if not lo <= n <= hi:
+                    return f"{field.name} = {n} is outside {lo}..{hi}"
+                allowed = self.CHOICES.get(field.name)
+                if allowed is not None and n not in allowed:
+                    return f"{field.name} = {n} is undefined (allowed: {allowed})"
+        return None
 
     def pack(self) -> bytes:
+        why = self.check()
+        if why is not None:
+            raise ProtocolError(f"cannot encode {self!r}: {why}")
         try:
             return self.FORMAT.pack(*dataclasses.astuple(self))
-        except struct.error as e:
+        except (struct.error, OverflowError, TypeError, ValueError) as e:
             raise ProtocolError(f"cannot encode {self!r}: {e}") from None
 
     @classmethod
     def unpack(cls, payload: bytes):
-        return cls(*cls.FORMAT.unpack(payload))
+        """Decode a payload; ProtocolError if it breaks the field rules (`check`)."""
+        values = cls.FORMAT.unpack(payload)
+        codes = cls.FORMAT.format.lstrip("<>=!@")
+        for field, code, value in zip(dataclasses.fields(cls), codes, values, strict=True):
+            if field.type in (bool, "bool") and code == "B" and value > 1:
+                raise ProtocolError(f"{cls.__name__}.{field.name} = {value} is not 0 or 1")
+        msg = cls(*values)
+        why = msg.check(sending=False)
+        if why is not None:
+            raise ProtocolError(f"{cls.__name__}: {why}")
+        return msg
 
     def quantized(self):
         """This message as the receiver decodes it (float32 fields rounded)."""
@@ -126,7 +171,7 @@ class _Message:
 
 @dataclasses.dataclass(frozen=True)
 class Observation(_Message):
-    """What the vision side sees (DESIGN.md tracking-log fields). NaN = unknown.
+    """What the vision side sees (docs/contracts.md tracking log fields). NaN = unknown.
 
     t_s: capture time, s (float64). offset_mm: y_r of the weld centre line at the horizontal
     stripe (+ = weld to the robot's left). heading_deg: weld direction relative to x_r, CCW +.
@@ -162,6 +207,8 @@ class VelocityCommand(_Message):
     WHEELS: ClassVar[int] = 1
     TYPE: ClassVar[MessageType] = MessageType.VELOCITY_COMMAND
     FORMAT: ClassVar[struct.Struct] = struct.Struct("<Bff")
+    FINITE: ClassVar[tuple[str, ...]] = ("a", "b")
+    CHOICES: ClassVar[dict[str, tuple[int, ...]]] = {"mode": (0, 1)}
 
     @classmethod
     def unicycle(cls, v_mm_s: float, omega_rad_s: float) -> VelocityCommand:
@@ -180,17 +227,19 @@ class Heartbeat(_Message):
 
     TYPE: ClassVar[MessageType] = MessageType.HEARTBEAT
     FORMAT: ClassVar[struct.Struct] = struct.Struct("<d")
+    FINITE: ClassVar[tuple[str, ...]] = ("t_s",)
 
 
 @dataclasses.dataclass(frozen=True)
 class Ack(_Message):
-    """Acknowledges the frame with sequence number `seq`; status 0 = accepted."""
+    """Acknowledges the frame with sequence number `seq`; status 0 = accepted, 1 = rejected."""
 
     seq: int
     status: int = 0
 
     TYPE: ClassVar[MessageType] = MessageType.ACK
     FORMAT: ClassVar[struct.Struct] = struct.Struct("<HB")
+    CHOICES: ClassVar[dict[str, tuple[int, ...]]] = {"status": (0, 1)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -272,7 +321,7 @@ class DecoderStats:
     crc_errors: int = 0  # complete frames whose CRC did not match
     bad_length: int = 0  # headers whose length is impossible for their type
     unknown_type: int = 0  # valid-CRC frames of a type this decoder does not know
-    bad_payload: int = 0  # valid-CRC frames whose payload did not unpack
+    bad_payload: int = 0  # valid-CRC frames whose payload breaks the field rules
 
     @property
     def dropped(self) -> int:
@@ -341,7 +390,7 @@ class Decoder:
                 continue
             try:
                 msg = cls.unpack(body[_HEADER.size :])
-            except (struct.error, ValueError, TypeError):
+            except (struct.error, ValueError, TypeError):  # ProtocolError is a ValueError
                 self.stats.bad_payload += 1
                 del buf[:end]
                 continue

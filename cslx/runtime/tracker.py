@@ -8,7 +8,7 @@ frame: the pipeline state (MED filters warm-started frame to frame, the tracking
 on the device, and one small vector (`cslx.runtime.pipeline.SUMMARY_FIELDS`) comes back to the host.
 
 Weld-line model (section 4.3 of the paper gives none; this is cslx's). In the robot frame
-(DESIGN.md) the followed weld is the line y_r = e + tan θ · (x_r − x_ref), with x_ref the
+(docs/contracts.md) the followed weld is the line y_r = e + tan θ · (x_r − x_ref), with x_ref the
 x_r where the horizontal stripe meets the wall (150 mm on the default rig): e is the
 lateral offset (mm, + = weld to the robot's left) and θ the heading (rad, CCW +). A Kalman
 filter over s = (e, θ):
@@ -57,7 +57,7 @@ import numpy as np
 
 __all__ = ["KalmanConfig", "Observation", "Tracker", "LOG_FIELDS"]
 
-#: The tracking-log columns of DESIGN.md ("Tracking log"), in order.
+#: The tracking-log columns of docs/contracts.md ("Tracking log"), in order.
 LOG_FIELDS = (
     "frame",
     "source",
@@ -95,7 +95,7 @@ class KalmanConfig:
 
 @dataclasses.dataclass
 class Observation:
-    """What the tracker reports for one frame (DESIGN.md tracking-log meanings; NaN = unknown).
+    """What the tracker reports for one frame (docs/contracts.md, tracking log; NaN = unknown).
 
     frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
     filtered weld line. bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
@@ -136,7 +136,7 @@ class Observation:
         )
 
     def log_row(self, source: str = "") -> dict[str, Any]:
-        """One row of the tracking log: the DESIGN.md columns, then the extras."""
+        """One row of the tracking log: the docs/contracts.md columns, then the extras."""
         row = {
             "frame": self.frame,
             "source": source,
@@ -246,7 +246,7 @@ class Tracker:
         from . import pipeline as pl
 
         self._log = _logger(log)
-        # float32 is the speed path (DESIGN.md performance facts).
+        # float32 is the speed path (docs/metrics.md, performance notes).
         self.sensor = jax.tree_util.tree_map(
             lambda x: jnp.asarray(x, jnp.float32) if isinstance(x, jax.Array) else x, sensor
         )
@@ -279,7 +279,7 @@ class Tracker:
 
     @classmethod
     def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
-        """A tracker for a calibration JSON file (DESIGN.md contract) or a `Sensor`.
+        """A tracker for a calibration JSON file (docs/contracts.md) or a `Sensor`.
 
         Keyword arguments go to `Tracker` (kalman, speed_mm_s, fps, roi).
         Raises `cslx.sensor.CalibrationError` for a bad file.

@@ -347,7 +347,7 @@ def weld_line_from_features(
     Fits y_r = y0 + m (x_r − x_ref) to the centres (robot frame, mm) — typically the
     horizontal stripe's bead centres of recent frames moved into the current robot frame by
     odometry, weighted by confidence (0 for frames without a bead). offset = y0, heading =
-    atan(m) in degrees, CCW positive (DESIGN.md tracking-log convention). When the weighted
+    atan(m) in degrees, CCW positive (docs/contracts.md tracking log convention). When the weighted
     spread of x_r is below `min_spread_mm` (e.g. a single frame) the heading is not
     observable: offset is the weighted mean y_r, heading NaN, heading_valid False.
     """

@@ -12,7 +12,7 @@ and spread out. The paper scores a space by the kurtosis of its columns, eqs. (9
 
 and searches the integer grid w_r ∈ {0, 1, 2}, w_g, w_b ∈ {−2..2}, not all zero (74 spaces).
 
-Correction 4 (DESIGN.md): the printed per-column ratio lacks the factor M of the sample
+Correction 4 (docs/corrections.md): the printed per-column ratio lacks the factor M of the sample
 kurtosis, and its "−3" is applied once to the sum over N columns instead of to each column.
 Both forms are offered:
 

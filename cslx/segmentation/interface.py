@@ -6,8 +6,7 @@ stripe) or per-row (vertical stripe) centres with any of `METHODS`:
 - ``"cm"``, ``"la"``, ``"qa"``, ``"aa"``: the baselines of `cslx.segmentation.baselines`;
 - ``"steger"``: Steger's detector (`cslx.segmentation.steger`) on the monochrome image, no MED;
 - ``"med"``: the paper's full method (sections 3.1–3.3): MED along the stripe's search
-  direction (`cslx.segmentation.med.med`, delay-compensated output aligned with the image),
-  then Steger.
+  direction (`med.med`, delay-compensated output aligned with the image), then Steger.
 - ``"linked"``: the robust detector of issue 11 (`cslx.segmentation.robust`): clip-aware colour
   search, clipped cores filled from their flanks, σ from the measured stripe width, candidate
   ridges linked into one continuous path (`cslx.segmentation.ridges`); its `Centres` carry a
@@ -41,7 +40,7 @@ METHODS = ("cm", "la", "qa", "aa", "steger", "med", "linked")
 STRIPES = ("h", "v")
 #: Steger scale for the rendered stripes (Gaussian sheet profile of ≈ 2 px std at 230 mm).
 DEFAULT_SIGMA = 2.0
-#: A 3-D error above this many mm is a gross outlier (DESIGN.md, Metrics).
+#: A 3-D error above this many mm is a gross outlier (docs/metrics.md.
 
 _BASELINES = {"cm": baselines.cm, "la": baselines.la, "qa": baselines.qa, "aa": baselines.aa}
 
@@ -58,8 +57,8 @@ def monochrome_for(image: ArrayLike, space: Any = "r-g", stripe: str = "h"):
     Args:
         image: (H, W, 3) RGB frame (uint8 or float), or an (H, W) frame already monochrome
             (returned unchanged as float; `space` is then ignored).
-        space: a name or weights string for `cslx.segmentation.colour.parse_space` ("r", "r-g",
-            "gray", "W_R,W_G,W_B"), "auto" for the kurtosis search of the stripe's direction, or
+        space: a name or weights string for `colour.parse_space` ("r", "r-g", "gray",
+            "W_R,W_G,W_B"), "auto" for the kurtosis search of the stripe's direction, or
             three weights.
         stripe: "h" or "v"; "auto" scores columns for "h" and rows for "v".
 

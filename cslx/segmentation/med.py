@@ -10,7 +10,7 @@ and W (‖W‖ = 1, eq. (20)) maximises the kurtosis of the output columns, eq. 
     O(W) = ( Σ_j Σ_i (B_ij − μ_j)⁴ / (Σ_i (B_ij − μ_j)²)² − 3 )².            (19)
 
 Setting the gradient to zero gives the fixed point of eqs. (22)–(24), in the form of
-DESIGN.md correction 5 (X the centred input, U_j = Σ_i (B_ij − μ_j)², k_j = Σ(B−μ)⁴/U_j²):
+docs/corrections.md, 5 (X the centred input, U_j = Σ_i (B_ij − μ_j)², k_j = Σ(B−μ)⁴/U_j²):
 
     R_kl = Σ_j (k_j / U_j) Σ_i X_{i−l,j} X_{i−k,j},
     b_k  = Σ_j U_j⁻²  Σ_i (B_ij − μ_j)³ X_{i−k,j},

@@ -29,7 +29,7 @@ def stripe_errors(
     *,
     gross_mm: float = GROSS_MM,
 ) -> dict[str, float]:
-    """Score estimated centres of one stripe against ground truth (DESIGN.md, Metrics).
+    """Score estimated centres of one stripe against ground truth (docs/metrics.md.
 
     The estimate of each column (row) is triangulated with the true calibration
     (`cslx.sensor.triangulate`) and compared with the ground-truth 3-D point of the same

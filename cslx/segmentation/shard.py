@@ -14,7 +14,7 @@ same frames and each places only the shards of its own devices.
 batched path (the JAX methods "steger" and "med" of `cslx.segmentation.extract.extract`).
 
 Frames are independent here (an archive, not a video): MED starts cold on every frame, as
-`cslx.segmentation.extract.extract` does. Video tracking, where each frame warm-starts from the last, is
+`cslx.segmentation.extract` does. Video tracking, where each frame warm-starts from the last, is
 sequential and belongs to `cslx.runtime.tracker`.
 """
 
@@ -228,7 +228,7 @@ def extract_batch(
         batch_size, devices, vmap_size, progress: as `process_archive`.
 
     Returns:
-        `cslx.segmentation.steger.Centres` with NumPy fields of shape (F, N): the same values as calling
+        `Centres` with NumPy fields of shape (F, N): the same values as calling
         `extract` frame by frame.
     """
     from .colour import parse_space

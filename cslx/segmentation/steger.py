@@ -20,7 +20,7 @@ crosses that column's centre: v* = v + t / n_v (moving along the tangent from St
 p = (v + t n_v, u + t n_u) back to column u; exact for straight lines, and it keeps the
 column index exact so that ground truth per column applies). Among the accepted points of a
 column the strongest wins; the selection is a max, a mask and masked sums instead of
-`argmax` + gather (DESIGN.md, performance facts). Ties are averaged.
+`argmax` + gather (docs/metrics.md, performance notes). Ties are averaged.
 
 σ follows Steger's condition for a bar profile of half-width w: σ ≥ w/√3
 (`sigma_for_width`). The separable Gaussian derivative filters are written as sums of

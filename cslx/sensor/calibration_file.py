@@ -71,7 +71,7 @@ def validate_calibration(data: Any, path: str = "<calibration>") -> dict[str, np
 
 
 def load_sensor(path: str | os.PathLike, dtype=None) -> Sensor:
-    """Read a calibration JSON file (DESIGN.md, Contracts) into a `Sensor`.
+    """Read a calibration JSON file (docs/contracts.md) into a `Sensor`.
 
     Raises:
         CalibrationError: unreadable file, invalid JSON, a missing key, a wrong shape, a
@@ -127,8 +127,13 @@ def save_sensor(
     stamp: bool = False,
     **extra: Any,
 ) -> None:
-    """Write a `Sensor` as the calibration JSON of DESIGN.md (extras are added verbatim)."""
+    """Write a `Sensor` as the calibration JSON of docs/contracts.md (extras are added verbatim).
+
+    Written atomically (`cslx.files.atomic_write`): a failure leaves the previous file intact.
+    """
+    from ..files import atomic_write
+
     data = sensor_to_dict(sensor, rms_px, stamp=stamp, **extra)
-    with open(path, "w", encoding="utf-8") as f:
+    with atomic_write(path, "w", encoding="utf-8") as f:
         json.dump(data, f, indent=1)
         f.write("\n")

@@ -1,6 +1,6 @@
 """Pinhole camera with Brown–Conrady lens distortion, exactly as OpenCV defines it.
 
-The paper's eq. (4) is garbled (DESIGN.md, correction 1). cslx uses OpenCV's model
+The paper's eq. (4) is garbled (docs/corrections.md, 1). cslx uses OpenCV's model
 with normalised coordinates (x, y) = (X/Z, Y/Z) and r² = x² + y²:
 
     x_d = x (1 + k1 r² + k2 r⁴) + 2 p1 x y + p2 (r² + 2 x²)

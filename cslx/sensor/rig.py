@@ -1,11 +1,11 @@
 """The cross structured-light sensor: camera + two laser planes + camera-to-robot transform.
 
 Plane i is `a x + b y + c z + 1 = 0` in the camera frame, mm (eq. (1)). Triangulation
-follows DESIGN.md correction 3 (the paper's eq. (27) drops the depth): for the unit ray r
+follows docs/corrections.md, 3 (the paper's eq. (27) drops the depth): for the unit ray r
 of an undistorted pixel, the camera-frame point is X_c = −r / (n·r) with n = (a, b, c),
 and the robot-frame point is X_r = R_cr X_c + T_cr.
 
-The calibration file is the JSON of DESIGN.md (Contracts): `image_size` [w, h], `K` 3×3,
+The calibration file is the JSON of docs/contracts.md: `image_size` [w, h], `K` 3×3,
 `dist` [k1, k2, p1, p2], `rms_px`, `planes` [[a1,b1,c1],[a2,b2,c2]], `R_cr` 3×3,
 `T_cr` [3], plus optional extras that are kept verbatim.
 """
@@ -31,7 +31,7 @@ __all__ = [
     "plane_angle_deg",
 ]
 
-#: Table 4 of the paper with v0 corrected (DESIGN.md, correction 2).
+#: Table 4 of the paper with v0 corrected (docs/corrections.md, 2).
 TABLE4_K = ((922.435, 0.0, 329.168), (0.0, 917.356, 270.566), (0.0, 0.0, 1.0))
 TABLE4_DIST = (-0.291459, 0.157027, -1.354e-4, -2.682e-4)
 
@@ -131,7 +131,7 @@ def default_mount(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-robot transform of the default rig: the camera looks straight at the wall.
 
-    Robot frame (DESIGN.md): x_r forward, y_r left, z_r out of the wall. The camera's image
+    Robot frame (docs/contracts.md): x_r forward, y_r left, z_r out of the wall. The camera's image
     u axis points to the robot's right (x_c = −y_r), v axis backwards (y_c = −x_r) and its
     optical axis into the wall (z_c = −z_r), so the horizontal stripe crosses a weld that
     runs along the direction of travel. The optical centre is `standoff_mm` above the wall

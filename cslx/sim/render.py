@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..files import atomic_directory, atomic_write
 from ..sensor import Sensor, default_sensor, load_sensor, save_sensor
 from .scene import (
     MAX_WELDS,
@@ -376,7 +377,7 @@ def _write_npz(path: str, arrays: dict[str, np.ndarray]) -> None:
             info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
             info.compress_type = zipfile.ZIP_DEFLATED
             zf.writestr(info, data.getvalue())
-    with open(path, "wb") as f:
+    with atomic_write(path, "wb") as f:
         f.write(buf.getvalue())
 
 
@@ -388,10 +389,11 @@ def write_dataset(
     names: list[str] | None = None,
     extra: dict[str, Any] | None = None,
 ) -> list[str]:
-    """Write rendered data per DESIGN.md (Contracts): PNG frames, `sensor.json`, `gt.npz`.
+    """Write rendered data per docs/contracts.md: PNG frames, `sensor.json`, `gt.npz`.
 
     Args:
-        out_dir: created if missing.
+        out_dir: created if missing. Written atomically (`cslx.files.atomic_directory`):
+            on a failure nothing in it changes.
         images: (F, H, W, 3) uint8 RGB.
         gt: arrays with a leading frame axis (`h_v`, `h_xyz`, `v_u`, `v_xyz`, …) or any other
             arrays (calibration poses); written to `gt.npz` with `frames` (the file names).
@@ -410,15 +412,20 @@ def write_dataset(
     names = list(names) if names is not None else [f"frame_{i:05d}.png" for i in range(len(images))]
     if len(names) != len(images):
         raise ValueError(f"{len(names)} names for {len(images)} images")
-    os.makedirs(out_dir, exist_ok=True)
-    for name, img in zip(names, images, strict=True):
-        if not cv2.imwrite(os.path.join(out_dir, name), np.ascontiguousarray(img[..., ::-1])):
-            raise OSError(f"cannot write {os.path.join(out_dir, name)}")
-    save_sensor(sensor, os.path.join(out_dir, "sensor.json"))
+    for name in names:
+        if os.path.basename(name) != name or name in ("", ".", "..", "sensor.json", "gt.npz"):
+            raise ValueError(f"frame name {name!r} must be a plain file name")
     arrays = {k: np.asarray(v) for k, v in gt.items()}
     arrays.update({k: np.asarray(v) for k, v in (extra or {}).items()})
     arrays["frames"] = np.asarray(names, dtype=str)
-    _write_npz(os.path.join(out_dir, "gt.npz"), arrays)
+    # Everything is staged in a hidden folder and moved in at the end, `gt.npz` last: a
+    # failure leaves `out_dir` as it was, and a `gt.npz` always lists frames that exist.
+    with atomic_directory(out_dir, last=("gt.npz",)) as stage:
+        for name, img in zip(names, images, strict=True):
+            if not cv2.imwrite(os.path.join(stage, name), np.ascontiguousarray(img[..., ::-1])):
+                raise OSError(f"cannot write {os.path.join(out_dir, name)}")
+        save_sensor(sensor, os.path.join(stage, "sensor.json"))
+        _write_npz(os.path.join(stage, "gt.npz"), arrays)
     return names
 
 

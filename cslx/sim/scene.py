@@ -4,7 +4,7 @@ World frame: the wall is locally the plane z_w = 0 (optionally a cylinder whose 
 along y_w), z_w points out of the wall towards the robot. Weld beads are circular-arc caps on
 it, so the surface is the height field z_w = S(x_w, y_w).
 
-Robot frame (DESIGN.md): x_r forward, y_r left, z_r out of the wall; a `RobotPose` places it
+Robot frame (docs/contracts.md): x_r forward, y_r left, z_r out of the wall; a `RobotPose` places it
 in the world. The camera pose follows from the sensor's camera→robot transform.
 """
 

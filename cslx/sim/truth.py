@@ -33,7 +33,7 @@ def _welds_in_robot(world: World, pose: RobotPose):
 def true_weld_line(
     world: World, pose: RobotPose, sensor: Sensor | None = None, follow: int = 0, crossing: int = 1
 ) -> dict[str, float]:
-    """Tracking ground truth in the robot frame (DESIGN.md, "Tracking log").
+    """Tracking ground truth in the robot frame (docs/contracts.md, "Tracking log").
 
     The followed weld's centre line (on the wall, z_w = 0) meets laser plane 0 at one point:
     `offset_mm` is its y_r (positive: weld to the robot's left) and `stripe_x_mm` its x_r;

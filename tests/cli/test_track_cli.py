@@ -1,4 +1,4 @@
-"""`cslx track --dry-run` on a rendered PNG directory writes the DESIGN.md tracking log."""
+"""`cslx track --dry-run` on a rendered PNG directory writes the docs/contracts.md tracking log."""
 
 import csv
 import logging

@@ -187,6 +187,9 @@ def test_link_survives_pty_loss_and_reconnects():
         sim.reconnect()
         assert wait_for(lambda: link.connected, timeout=3.0)
         assert link.stats["reconnects"] >= 1
+        # the first frame on the new port is STOP(LINK_ERROR), and the robot obeys it
+        assert any(r is StopReason.LINK_ERROR for _, r in link.stops_sent)
+        assert wait_for(lambda: sim.state().stop_reason == StopReason.LINK_ERROR, timeout=2.0)
         seq = link.send_command(10.0, 0.0)
         assert seq is not None and link.wait_ack(seq, 1.0)
         assert wait_for(lambda: link.latest_state is not None and not link.latest_state.stopped)
@@ -224,3 +227,22 @@ def test_open_errors():
         RobotLink("/nonexistent/ttyUSB9").open()
     with pytest.raises(ValueError, match="stall_timeout_s"):
         RobotLink("loop://", stall_timeout_s=0)
+
+
+def test_unencodable_messages_are_refused_without_resetting_the_link():
+    """A float beyond float32 or a NaN command is a ProtocolError: counted, never an I/O
+    error, the port stays open; a refused command stops the robot (STOP FAULT)."""
+    with RobotSimulator() as sim, RobotLink(sim.port, stall_timeout_s=5.0) as link:
+        link.feed(1.0)
+        assert link.wait_ack(link.send_command(30.0, 0.0), 1.0)
+        assert wait_for(lambda: not sim.state().stopped)
+        huge = Observation(1.0, 1e39, 0.0, 0.0, 0.0, False, 0.0, 0.9)
+        assert link.send_observation(huge) is None
+        assert link.send_command(float("nan"), 0.0) is None
+        assert link.stats["encode_errors"] == 2
+        assert link.stats["io_errors"] == 0 and link.stats["reconnects"] == 0
+        assert link.connected
+        assert wait_for(lambda: sim.state().stopped and sim.state().stop_reason == StopReason.FAULT)
+        # the link still works
+        assert link.wait_ack(link.send_command(20.0, 0.0), 1.0)
+        assert wait_for(lambda: not sim.state().stopped)

@@ -1,4 +1,4 @@
-"""Colour space by kurtosis (section 3.1, eqs. (8)–(12), DESIGN.md corrections 4 and 8).
+"""Colour space by kurtosis (section 3.1, eqs. (8)–(12), docs/corrections.md, 4 and 8).
 
 References: SciPy's sample kurtosis, NumPy for eq. (8), finite differences for gradients,
 and scenes whose laser colour is known (own small scenes; one rendered frame per laser

@@ -1,4 +1,4 @@
-"""MED (section 3.2, eqs. (18)–(26), DESIGN.md corrections 5–7) against independent references.
+"""MED (section 3.2, eqs. (18)–(26), docs/corrections.md, 5–7) against independent references.
 
 References: a plain NumPy loop of eqs. (22)–(24), `jax.grad` of the directly convolved
 objective of eq. (19) for stationarity, and stripes rendered at known sub-pixel rows for the
@@ -324,7 +324,7 @@ def test_float32_agrees_with_float64():
     assert r32.output.dtype == jnp.float32 and r32.filter.dtype == jnp.float32
     assert int(r32.steps) == int(r64.steps)
     # Same loading, same number of steps: float32 rounding (6e-8) amplified by the
-    # conditioning of R gives ~1e-6 on the filter (measured 1.0e-6; DESIGN.md: 6e-6).
+    # conditioning of R gives ~1e-6 on the filter (measured 1.0e-6; docs/metrics.md: 6e-6).
     np.testing.assert_allclose(np.asarray(r32.filter), np.asarray(r64.filter), atol=2e-5)
     scale = float(jnp.max(jnp.abs(r64.output)))
     np.testing.assert_allclose(np.asarray(r32.output), np.asarray(r64.output), atol=5e-5 * scale)

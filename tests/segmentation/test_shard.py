@@ -1,4 +1,4 @@
-"""Sharded archive processing (`cslx.segmentation.shard`) gives the single-device results, really sharded.
+"""Sharded archive processing (`cslx.segmentation.shard`) equals the single-device results.
 
 The multi-device runs use 4 CPU devices forced with
 ``XLA_FLAGS=--xla_force_host_platform_device_count=4`` in a subprocess (the flag must be set
