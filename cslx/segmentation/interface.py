@@ -10,7 +10,8 @@ stripe) or per-row (vertical stripe) centres with any of `METHODS`:
 - ``"linked"``: the robust detector of issue 11 (`cslx.segmentation.robust`): clip-aware colour
   search, clipped cores filled from their flanks, σ from the measured stripe width, candidate
   ridges linked into one continuous path (`cslx.segmentation.ridges`); its `Centres` carry a
-  predicted standard deviation (`sigma`, px) and `saturated` flags.
+  predicted standard deviation (`sigma`, px) and `saturated` flags. It is `cslx extract`'s
+  default: the evidence (results/robust_extraction.md) is in `cslx.segmentation.robust`.
 
 `centres_to_pixels` turns centres into OpenCV pixel coordinates (the centre-file contract of
 docs/contracts.md); `cslx.segmentation.metrics` scores them against rendered ground truth.
