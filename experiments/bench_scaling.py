@@ -30,7 +30,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from experiments.bench_speed import RESULTS, load_average, ping_pong, sensor32, timeit, video_frames  # noqa: E402
+from experiments.bench_speed import ping_pong, sensor32, video_frames  # noqa: E402
+from experiments.common import RESULTS, load_average, machine_record, timeit  # noqa: E402
 
 SIZES = ((320, 240), (640, 480), (1280, 720), (1920, 1080))
 LENGTHS = (16, 32, 64, 120, 240, 360, 480)
@@ -175,8 +176,9 @@ def main(quick: bool = False, seed: int = 0, out=RESULTS, **overrides) -> list[d
                 ms_per_frame=res["time_ms"] / B,
             )
 
-    load_end = load_average()
-    prov = provenance(dict(cfg, quick=quick, seed=seed, load_start=load_start, load_end=load_end))
+    machine = machine_record(load_start)
+    load_end = machine["load_end"]
+    prov = provenance(dict(cfg, quick=quick, seed=seed, **machine))
     os.makedirs(out, exist_ok=True)
     fields = ["sweep", "x", "name", "time_ms", "p90_ms", "calls", "pixels", "roi_fraction",
               "sigma", "compile_s", "med_steps", "ms_per_step", "frames_per_s",
@@ -236,11 +238,7 @@ def _plot(rows, path, prov, load_start, load_end):
     a.set_title("archive throughput (MED + Steger, h stripe)")
     a.legend(fontsize=8)
     a.grid(True, alpha=0.3)
-    load = (
-        " / ".join(f"{x:.1f}" for x in load_start)
-        + " → "
-        + " / ".join(f"{x:.1f}" for x in load_end)
-    )
+    load = f"{load_start} → {load_end}"
     fig.suptitle(
         f"cslx scaling on {prov['cpu']} ({prov['cores']} cores, shared: load {load}); "
         f"git {prov['git']}; JAX {prov['versions'].get('jax')}, float32",

@@ -136,15 +136,20 @@ class Pool:
         )
 
 
-def time_calls(
-    fn: Callable[[Any], Any], inputs: list, n_calls: int, budget_s: float, warmup: int = 3
+def timeit(
+    fn: Callable[[Any], Any],
+    inputs: list,
+    n_calls: int,
+    budget_s: float,
+    warmup: int = 2,
+    min_calls: int = 3,
 ) -> dict[str, float]:
-    """Median wall time (ms) of `fn(x)` cycling over `inputs`, after `warmup` calls.
+    """Median / p90 wall time (ms) of `fn(x)` cycling over `inputs`, after warm-up.
 
-    Stops after `n_calls` calls or once `budget_s` seconds have been spent (at least 5
-    calls), and reports how many calls were timed. `fn` must block until its result is
-    ready (e.g. convert to NumPy). The first call's time (jit compile + run) is returned
-    separately as `first_ms`.
+    The first call (jit compile + run) is timed on its own (`first_ms`), then `warmup` more
+    calls run untimed. Stops after `n_calls` timed calls or once `budget_s` seconds have been
+    spent (at least `min_calls`). `fn` must block until its result is ready (e.g.
+    `jax.block_until_ready` or a conversion to NumPy).
     """
     t0 = time.perf_counter()
     fn(inputs[0])
@@ -154,7 +159,7 @@ def time_calls(
     times = []
     start = time.perf_counter()
     while len(times) < n_calls and (
-        len(times) < min(5, n_calls) or time.perf_counter() - start < budget_s
+        len(times) < min(min_calls, n_calls) or time.perf_counter() - start < budget_s
     ):
         x = inputs[len(times) % len(inputs)]
         t = time.perf_counter()
@@ -163,9 +168,23 @@ def time_calls(
     ms = np.asarray(times) * 1e3
     return dict(
         time_ms=float(np.median(ms)),
-        time_p90_ms=float(np.percentile(ms, 90)),
-        time_calls=len(ms),
+        p90_ms=float(np.percentile(ms, 90)),
+        calls=len(ms),
         first_ms=first * 1e3,
+    )
+
+
+def time_calls(
+    fn: Callable[[Any], Any], inputs: list, n_calls: int, budget_s: float, warmup: int = 3
+) -> dict[str, float]:
+    """`timeit` (at least 5 calls) with Table 6's column names: time_ms, time_p90_ms,
+    time_calls, first_ms."""
+    r = timeit(fn, inputs, n_calls, budget_s, warmup=warmup, min_calls=5)
+    return dict(
+        time_ms=r["time_ms"],
+        time_p90_ms=r["p90_ms"],
+        time_calls=r["calls"],
+        first_ms=r["first_ms"],
     )
 
 
@@ -175,6 +194,17 @@ def load_average() -> str:
         return " / ".join(f"{x:.1f}" for x in os.getloadavg())
     except OSError:
         return "unknown"
+
+
+def machine_record(load_start: str | None = None) -> dict[str, Any]:
+    """What a timing depends on besides the code: cores, load at start and now, threads."""
+    return dict(
+        cores=os.cpu_count(),
+        load_start=load_start if load_start is not None else load_average(),
+        load_end=load_average(),
+        OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS"),
+        XLA_FLAGS=os.environ.get("XLA_FLAGS", ""),
+    )
 
 
 def parser(doc: str, frames: int, seed: int) -> argparse.ArgumentParser:

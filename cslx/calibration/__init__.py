@@ -6,6 +6,8 @@
 - `planes`: stripe points lifted onto the boards, laser planes fitted robustly (Figs. 4–5).
 - `robot_frame`: the camera-to-robot rigid transform.
 - `joint`: one joint refinement of camera, poses and planes (beyond the paper).
+- `pipeline`: `calibrate_sensor`, the whole calibration in one call (corners → camera →
+  planes → robot frame → `Sensor` + report), used by `cslx calibrate`, the demo and Table 5.
 """
 
 from .camera import CameraCalibration as CameraCalibration
@@ -15,8 +17,12 @@ from .corners import board_points as board_points
 from .corners import detect_corners as detect_corners
 from .joint import JointCalibration as JointCalibration
 from .joint import refine_sensor as refine_sensor
+from .pipeline import SensorCalibration as SensorCalibration
+from .pipeline import calibrate_sensor as calibrate_sensor
+from .pipeline import read_image as read_image
 from .planes import PlaneCalibration as PlaneCalibration
 from .planes import PlaneFit as PlaneFit
+from .planes import PlaneGates as PlaneGates
 from .planes import board_mask as board_mask
 from .planes import calibrate_planes as calibrate_planes
 from .planes import edge_crossings as edge_crossings
@@ -47,6 +53,10 @@ __all__ = [
     "calibrate_camera",
     "PlaneFit",
     "PlaneCalibration",
+    "PlaneGates",
+    "SensorCalibration",
+    "calibrate_sensor",
+    "read_image",
     "fit_plane",
     "laser_centres",
     "lift_to_board",

@@ -1,7 +1,7 @@
-"""A simple stripe-centre extractor for laser-plane calibration (no Steger, no MED).
+"""A simple stripe-centre extractor for laser-plane calibration (`method="simple"`).
 
-Used by `cslx.calibration` with `method="simple"`. The calibration images are
-well lit boards with a bright red stripe, so a plain detector suffices:
+Used by `cslx.calibration` with `method="simple"` (`cslx.segmentation.extract` otherwise).
+The calibration images are well lit boards with a bright red stripe, so a plain detector suffices:
 
 1. I = R − G (a red laser on a grey board), Gaussian-smoothed (σ px), zero outside a mask;
 2. per column (horizontal stripe) or per row (vertical stripe): the maximum, refined to

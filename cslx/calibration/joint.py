@@ -17,7 +17,7 @@ import optimistix as optx
 from jaxtyping import ArrayLike
 
 from ..sensor.camera import Camera, undistort_step
-from ..sensor.rig import plane_angle_deg
+from ..sensor.rig import CalibrationError, plane_angle_deg
 from .camera import CameraCalibration, _reprojection, _scaled, _unpack
 from .planes import PlaneCalibration
 from .zhang import (
@@ -132,6 +132,11 @@ def refine_sensor(
     F = len(img)
     if F != len(calib.rvecs):
         raise ValueError(f"{F} views of corners for {len(calib.rvecs)} calibrated poses")
+    if len(planes.planes) != 2:
+        raise CalibrationError(
+            f"the joint refinement needs both planes of the cross; this calibration has "
+            f"{len(planes.planes)} ({', '.join(planes.stripes)})"
+        )
     uv = np.concatenate([planes.pixels[k][planes.fits[k].inliers] for k in range(2)])
     view = np.concatenate([planes.views[k][planes.fits[k].inliers] for k in range(2)])
     pid = np.concatenate([np.full(int(planes.fits[k].inliers.sum()), k) for k in range(2)])

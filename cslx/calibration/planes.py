@@ -4,6 +4,11 @@ Stripe centres of the laser-on images that fall on the board are lifted to 3-D b
 intersecting their rays with that pose's board plane; each laser plane
 a x + b y + c z + 1 = 0 is fitted to its points by orthogonal least squares after a
 least-median-of-squares start and iterative trimming of outliers.
+
+Beyond the paper's cross: the number of laser lines (one line laser, or a cross) is found
+from the images — each candidate stripe's plane must pass `PlaneGates` (RMS, inlier share,
+points, views) or it is refused with the reason — and the laser images may be the plain
+images themselves (the centres are taken inside the board's image only).
 """
 
 from __future__ import annotations
@@ -258,26 +263,127 @@ def stripe_pixels(pos: np.ndarray, valid: np.ndarray, stripe: str) -> np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
-class PlaneCalibration:
-    """Both laser planes from laser-on images (plane 0: horizontal stripe, 1: vertical).
+class PlaneGates:
+    """When a fitted laser plane is refused instead of written (never silently).
+
+    A real line-laser plane fits to ≈ 0.1 mm RMS and a rendered one to ≈ 0.01–0.05 mm; a
+    "plane" fitted to chessboard edges where there is no second line came out at 21 mm RMS
+    with a third of its points rejected (issue 15). The gates sit far from both.
 
     Attributes:
-        planes: (2, 3) coefficients a x + b y + c z + 1 = 0, camera frame.
-        fits: the two `PlaneFit`s (residuals, inliers, rms in mm, covariance).
-        angle_deg: angle between the planes.
+        max_rms_mm: largest RMS orthogonal distance of the inliers, mm.
+        min_inlier_share: smallest share of the stripe points the robust fit keeps.
+        min_points: fewest inlier points over all views.
+        min_views: fewest board poses that show the stripe (a plane needs two orientations).
+        min_board_angle_deg: the boards that show a stripe must differ in orientation by at
+            least this much, else the plane's tilt about the stripe is undetermined.
+        same_line_deg: a second candidate plane within this angle of the first is the same
+            line found by the other extractor, not a second line.
+        min_support: a second line needs at least this share of the first line's inliers:
+            a laser line crosses every board, so a few hundred stray centres beside a line of
+            thousands are chessboard edges (rendered single-line boards give ≈ 0.1; the
+            cross's two lines 0.4–0.9).
+    """
+
+    max_rms_mm: float = 0.5
+    min_inlier_share: float = 0.7
+    min_points: int = 50
+    min_views: int = 2
+    min_board_angle_deg: float = 2.0
+    same_line_deg: float = 10.0
+    min_support: float = 0.25
+
+
+@dataclasses.dataclass(frozen=True)
+class PlaneCalibration:
+    """The laser planes found in laser-on images: one (a line laser) or two (a cross).
+
+    Attributes:
+        planes: (P, 3) coefficients a x + b y + c z + 1 = 0, camera frame; P = 1 or 2, the
+            horizontal stripe's plane first.
+        stripes: the stripe ("h"/"v") of each plane.
+        fits: the P `PlaneFit`s (residuals, inliers, rms in mm, covariance).
+        angle_deg: angle between the planes (NaN with one plane).
         points: per plane, the (M, 3) camera-frame stripe points on the boards.
         pixels: per plane, their (M, 2) pixels.
         views: per plane, the (M,) index of the view each point came from.
-        counts: (F, 2) stripe points kept on the board per view and plane.
+        counts: (F, 2) stripe points on the board per view for the candidate stripes
+            (column 0: horizontal, 1: vertical; 0 where fewer than `min_points_per_view`).
+        rejected: candidate stripe → why it is not a plane of this calibration.
     """
 
     planes: np.ndarray
-    fits: tuple[PlaneFit, PlaneFit]
+    stripes: tuple[str, ...]
+    fits: tuple[PlaneFit, ...]
     angle_deg: float
-    points: tuple[np.ndarray, np.ndarray]
-    pixels: tuple[np.ndarray, np.ndarray]
-    views: tuple[np.ndarray, np.ndarray]
+    points: tuple[np.ndarray, ...]
+    pixels: tuple[np.ndarray, ...]
+    views: tuple[np.ndarray, ...]
     counts: np.ndarray
+    rejected: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    def summary(self) -> dict:
+        """The per-plane report written as calibration-file extras (docs/contracts.md)."""
+        return dict(
+            plane_rms_mm=[f.rms for f in self.fits],
+            plane_points=[int(f.inliers.sum()) for f in self.fits],
+            plane_outliers=[int((~f.inliers).sum()) for f in self.fits],
+            plane_inlier_share=[float(f.inliers.mean()) for f in self.fits],
+            plane_std=[f.std.tolist() for f in self.fits],
+            plane_covariance=[f.covariance.tolist() for f in self.fits],
+            plane_views=[int(len(np.unique(v))) for v in self.views],
+            lines_detected=list(self.stripes),
+            rejected_lines=dict(self.rejected),
+        )
+
+
+_NAMES = {"h": "horizontal", "v": "vertical"}
+
+
+def _read_rgb(image):
+    import cv2
+
+    if isinstance(image, str | os.PathLike):
+        bgr = cv2.imread(os.fspath(image), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise FileNotFoundError(f"cannot read image {os.fspath(image)!r}")
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return np.asarray(image)
+
+
+def _candidate(stripe, pts, counts, normals, gates, seed, n_images):
+    """Fit one candidate stripe's plane; (PlaneFit, None) or (None, why it is refused)."""
+    name = f"{_NAMES[stripe]} line"
+    k = "hv".index(stripe)
+    used = np.nonzero(counts[:, k] >= 1)[0]
+    per_image = counts[:, k].tolist()
+    if len(used) < gates.min_views:
+        return None, (
+            f"{name}: on the board in {len(used)} of {n_images} laser images (points per "
+            f"image: {per_image}); at least {gates.min_views} poses must show it on the board"
+        )
+    nu = normals[used]
+    spread = float(np.degrees(np.arccos(np.clip(np.abs(nu @ nu.T), 0, 1).min())))
+    if spread < gates.min_board_angle_deg:
+        return None, (
+            f"{name}: all boards that show it are nearly parallel (their normals are within "
+            f"{spread:.2f}° < {gates.min_board_angle_deg}°): the plane's tilt about the line "
+            "is undetermined; tilt the board between poses"
+        )
+    P = np.concatenate(pts[k])
+    try:
+        fit = fit_plane(P, seed=seed, min_points=gates.min_points)
+    except CalibrationError as e:
+        return None, f"{name}: {e}"
+    n_in, share = int(fit.inliers.sum()), float(fit.inliers.mean())
+    if fit.rms > gates.max_rms_mm or share < gates.min_inlier_share or n_in < gates.min_points:
+        return fit, (
+            f"{name}: poor plane fit (RMS {fit.rms:.3f} mm, limit {gates.max_rms_mm}; "
+            f"{n_in} of {len(P)} points inliers = {share:.0%}, limit "
+            f"{gates.min_inlier_share:.0%}; at least {gates.min_points} inliers): no such "
+            "laser line on the boards, or its centres are unreliable"
+        )
+    return fit, None
 
 
 def calibrate_planes(
@@ -287,97 +393,130 @@ def calibrate_planes(
     square: float,
     *,
     method: str = "auto",
+    lines: int | None = None,
+    stripes: Sequence[str] = ("h", "v"),
+    gates: PlaneGates | None = None,
     extent: float = 1.0,
     margin: float = 0.25,
     min_points_per_view: int = 10,
-    min_board_angle_deg: float = 2.0,
     seed: int = 0,
 ) -> PlaneCalibration:
-    """Fit both laser planes from laser-on images of the calibrated board poses (Figs. 4–5).
+    """Fit the laser planes from laser-on images of the calibrated board poses (Figs. 4–5).
 
-    For each view i: stripe centres (per column for the horizontal stripe, per row for the
-    vertical one) inside the board's image; their rays ∩ board plane i (the pose of
-    `calib`); points off the board (`extent` squares around the inner corners, less a
-    `margin`) dropped;
-    then `fit_plane` per stripe over all views.
+    For each view i and each candidate stripe (horizontal: a centre per column; vertical: a
+    centre per row): the stripe centres inside the board's image (so a laser image may be
+    the very image the corners came from); their rays ∩ board plane i (the pose of `calib`);
+    points off the board (`extent` squares around the inner corners, less a `margin`)
+    dropped; then `fit_plane` per candidate over all views.
+
+    How many lines: a candidate whose fit passes `gates` is a laser line; one that fails is
+    reported in `rejected` with the reason (a line laser has no second line: its
+    "horizontal" candidate is chessboard edges or the same line seen again, and is refused,
+    never written). `lines` = None keeps every line found (at least one); `lines` = 2
+    requires both (else `CalibrationError` naming the failing line); `lines` = 1 keeps the
+    best one (most inliers).
 
     Args:
         calib: camera calibration whose view i shows the same pose as `laser_images[i]`.
         laser_images: (H, W, 3) uint8 RGB frames (or paths) with the laser on.
         pattern, square: the board (inner corners (cols, rows), square side).
-        method: "simple" (`cslx.calibration._stripe`), a `cslx.segmentation.extract` method,
-            or "auto".
+        method: "simple" (`cslx.calibration._stripe`), a `cslx.segmentation.extract`
+            method, or "auto" (Steger).
+        lines: None (detect), 1 or 2.
+        stripes: the candidate stripes ("h", "v").
+        gates: when a plane is refused (`PlaneGates()` by default).
         extent: how far the board reaches beyond the inner corners, in squares (1: the
             outer row of squares; points beyond may fall off the board).
         margin: band inside that border to ignore, in squares.
         min_points_per_view: fewer points on a board do not count as a view of that stripe.
-        min_board_angle_deg: the boards that see a stripe must differ in orientation by at
-            least this much, else the plane's tilt about the stripe is undetermined.
         seed: seed of the robust fit.
 
     Raises:
-        CalibrationError: a stripe not on the board in at least two views, all boards nearly
-            parallel, too few stripe points, or a degenerate plane; the message says which.
+        CalibrationError: no laser line on the boards, fewer lines than `lines`, image and
+            pose counts that differ; the message says which line failed and why.
     """
-    import cv2
-
+    gates = gates or PlaneGates()
+    if lines not in (None, 1, 2):
+        raise ValueError(f"lines must be None (detect), 1 or 2, got {lines!r}")
+    stripes = tuple(stripes)
+    if not stripes or any(s not in ("h", "v") for s in stripes):
+        raise ValueError(f"stripes must be among 'h', 'v', got {stripes!r}")
+    if lines is not None and lines > len(stripes):
+        raise ValueError(f"lines={lines} but only {len(stripes)} candidate stripe(s)")
     if len(laser_images) != len(calib.rvecs):
         raise CalibrationError(
             f"{len(laser_images)} laser images for {len(calib.rvecs)} calibrated poses: "
             "each laser image must show the pose of the plain image with the same index"
         )
-    cols, rows = pattern
     Rs = calib.rotations
     pts, pix, views = ([], []), ([], []), ([], [])
     counts = np.zeros((len(laser_images), 2), int)
     for i, image in enumerate(laser_images):
-        if isinstance(image, str | os.PathLike):
-            bgr = cv2.imread(os.fspath(image), cv2.IMREAD_COLOR)
-            if bgr is None:
-                raise FileNotFoundError(f"cannot read image {os.fspath(image)!r}")
-            image = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        image = _read_rgb(image)
         mask = board_mask(calib.camera, Rs[i], calib.tvecs[i], pattern, square, extent)
-        for k, stripe in enumerate("hv"):
+        for stripe in stripes:
+            k = "hv".index(stripe)
             pos, valid = laser_centres(image, stripe, mask, method)
             uv = stripe_pixels(pos, valid & np.isfinite(pos), stripe)
             if len(uv) == 0:
                 continue
             Xc, Xt = lift_to_board(uv, calib.camera, Rs[i], calib.tvecs[i])
             keep = on_board(Xt, pattern, square, extent, margin)
-            counts[i, k] = int(keep.sum())
-            if counts[i, k] >= min_points_per_view:
+            if int(keep.sum()) >= min_points_per_view:
+                counts[i, k] = int(keep.sum())
                 pts[k].append(Xc[keep])
                 pix[k].append(uv[keep])
                 views[k].append(np.full(int(keep.sum()), i))
     normals = Rs[:, :, 2]
-    fits = []
-    for k, stripe in enumerate(("horizontal", "vertical")):
-        used = np.nonzero(counts[:, k] >= min_points_per_view)[0]
-        if len(used) < 2:
-            raise CalibrationError(
-                f"the {stripe} stripe (plane {k}) is on the board in {len(used)} of "
-                f"{len(laser_images)} laser images (points per image: {counts[:, k].tolist()}); "
-                "at least two poses must show it on the board"
+    fits, rejected = {}, {}
+    for stripe in stripes:
+        fit, why = _candidate(stripe, pts, counts, normals, gates, seed, len(laser_images))
+        if why is None:
+            fits[stripe] = fit
+        else:
+            rejected[stripe] = why
+    if len(fits) == 2:
+        # The same line found by both extractors (a line at ≈ 45° in the image)?
+        a, b = sorted(fits, key=lambda s: -int(fits[s].inliers.sum()))
+        angle = plane_angle_deg(fits[a].plane, fits[b].plane)
+        if angle < gates.same_line_deg:
+            del fits[b]
+            rejected[b] = (
+                f"{_NAMES[b]} line: its plane is {angle:.1f}° from the {_NAMES[a]} line's "
+                "(the same laser line found twice), not a second line"
             )
-        nu = normals[used]
-        cosines = np.clip(np.abs(nu @ nu.T), 0, 1)
-        spread = float(np.degrees(np.arccos(cosines.min())))
-        if spread < min_board_angle_deg:
-            raise CalibrationError(
-                f"all boards that show the {stripe} stripe are nearly parallel (their normals "
-                f"are within {spread:.2f}° < {min_board_angle_deg}°): the plane's tilt about "
-                "the stripe is undetermined; tilt the board between poses"
+    if len(fits) == 2:
+        a, b = sorted(fits, key=lambda s: -int(fits[s].inliers.sum()))
+        n_a, n_b = int(fits[a].inliers.sum()), int(fits[b].inliers.sum())
+        if n_b < gates.min_support * n_a:
+            del fits[b]
+            rejected[b] = (
+                f"{_NAMES[b]} line: {n_b} inlier points against {n_a} of the {_NAMES[a]} line "
+                f"(less than {gates.min_support:.0%}): stray centres, not a second laser line"
             )
-        fits.append(fit_plane(np.concatenate(pts[k]), seed=seed))
-    planes = np.stack([f.plane for f in fits])
+    if lines == 1 and len(fits) == 2:
+        a, b = sorted(fits, key=lambda s: -int(fits[s].inliers.sum()))
+        del fits[b]
+        rejected[b] = f"{_NAMES[b]} line: found, but --lines 1 keeps the line with most points"
+    if not fits or (lines is not None and len(fits) < lines):
+        want = "a laser line" if lines is None else f"{lines} laser line(s)"
+        raise CalibrationError(
+            f"found {len(fits)} laser line(s) on the boards, need {want}: "
+            + "; ".join(rejected[s] for s in stripes if s in rejected)
+        )
+    kept = tuple(s for s in ("h", "v") if s in fits)
+    ks = ["hv".index(s) for s in kept]
+    planes = np.stack([fits[s].plane for s in kept])
     return PlaneCalibration(
         planes=planes,
-        fits=(fits[0], fits[1]),
-        angle_deg=plane_angle_deg(planes[0], planes[1]),
-        points=(np.concatenate(pts[0]), np.concatenate(pts[1])),
-        pixels=(np.concatenate(pix[0]), np.concatenate(pix[1])),
-        views=(np.concatenate(views[0]), np.concatenate(views[1])),
+        stripes=kept,
+        fits=tuple(fits[s] for s in kept),
+        angle_deg=plane_angle_deg(planes[0], planes[1]) if len(kept) == 2 else float("nan"),
+        points=tuple(np.concatenate(pts[k]) for k in ks),
+        pixels=tuple(np.concatenate(pix[k]) for k in ks),
+        views=tuple(np.concatenate(views[k]) for k in ks),
         counts=counts,
+        rejected=rejected,
     )
 
 

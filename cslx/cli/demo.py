@@ -36,8 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--loop-frames",
         type=int,
-        default=300,
-        help="closed-loop frames at 20 fps (default 300: along the weld, through the T)",
+        default=360,
+        help="most closed-loop frames at 20 fps (default 360; the run ends 40 frames after "
+        "the turn at the T, about 260 frames)",
     )
 
 
@@ -54,14 +55,8 @@ class _Log:
 def _calibrate(out: str, seed: int, n_poses: int, log) -> tuple[object, dict, list[str]]:
     import numpy as np
 
-    from ..calibration import (
-        board_points,
-        calibrate_camera,
-        calibrate_planes,
-        detect_corners,
-        fit_rigid,
-    )
-    from ..sensor import default_sensor, plane_angle_deg, save_sensor, sensor_from_arrays
+    from ..calibration import board_points, calibrate_sensor
+    from ..sensor import default_sensor, plane_angle_deg
     from ..sim import render_calibration, write_dataset
 
     true = default_sensor()
@@ -75,35 +70,29 @@ def _calibrate(out: str, seed: int, n_poses: int, log) -> tuple[object, dict, li
         true,
     )
     write_dataset(os.path.join(out, "calibration", "laser"), cal_data["laser"], {}, true)
-    log("calibrating the camera (OpenCV corners, Zhang init, JAX Levenberg–Marquardt) ...")
-    t0 = time.perf_counter()
-    corners, skipped = detect_corners(list(cal_data["plain"]), pattern)
-    keep = [i for i, c in enumerate(corners) if c is not None]
-    cal = calibrate_camera([corners[i] for i in keep], board_points(pattern, square), (640, 480))
-    log(f"camera: RMS {cal.rms:.4f} px over {len(keep)} views ({len(skipped)} skipped)")
-    log("calibrating both laser planes from the laser-on images ...")
-    pc = calibrate_planes(cal, [cal_data["laser"][i] for i in keep], pattern, square)
-    # Robot frame (the paper's Figure 20): the corners of the first board, measured in the
-    # camera frame through its calibrated pose, are known in the robot frame (the target
-    # is mounted at a known place on the robot); a rigid fit gives R_cr, T_cr.
-    R0 = cal.rotations[0]
-    P_c = board_points(pattern, square) @ R0.T + cal.tvecs[0]
-    R_true, t_true = cal_data["R"][keep[0]], cal_data["t"][keep[0]]
-    P_true_c = board_points(pattern, square) @ R_true.T + t_true
-    # The target's corners are measured in the robot frame with 0.05 mm noise (a CMM).
+    # Robot frame (the paper's Figure 20): the corners of the first board are known in the
+    # robot frame (the target is mounted at a known place on the robot), measured with
+    # 0.05 mm noise (a CMM); `calibrate_sensor` fits R_cr, T_cr to them through the board's
+    # calibrated pose.
+    obj = board_points(pattern, square)
+    P_true_c = obj @ cal_data["R"][0].T + cal_data["t"][0]
     noise = np.random.default_rng([seed, 20]).normal(0.0, 0.05, P_true_c.shape)
     P_r = P_true_c @ np.asarray(true.R_cr).T + np.asarray(true.T_cr) + noise
-    R_cr, T_cr, res = fit_rigid(P_c, P_r)
-    elapsed = time.perf_counter() - t0
-    # Calibration runs in float64; the runtime sensor takes the default float dtype.
-    sensor = sensor_from_arrays(
-        np.asarray(cal.camera.K), np.asarray(cal.camera.dist), pc.planes, R_cr, T_cr, (640, 480)
-    )
+    log("calibrating: OpenCV corners, Zhang init, JAX Levenberg–Marquardt, laser planes ...")
+    result = calibrate_sensor(
+        list(cal_data["plain"]), pattern, square, laser_images=list(cal_data["laser"]),
+        lines=2, robot_board=(0, P_r), log=log,
+    )  # fmt: skip
+    cal, pc, sensor = result.camera, result.planes, result.sensor
+    keep, skipped = result.used, [name for name, _ in result.skipped]
+    R_cr, T_cr, res = result.R_cr, result.T_cr, result.robot_residuals_mm
+    elapsed = result.time_s
     path = os.path.join(out, "sensor.json")
-    save_sensor(sensor, path, cal.rms, stamp=True, plane_rms_mm=[f.rms for f in pc.fits])
+    result.save(path, stamp=True)
     K_est, K_true = np.asarray(cal.camera.K), np.asarray(true.camera.K)
     n_err = [
-        plane_angle_deg(pc.planes[k], np.asarray(true.planes[k])) for k in range(2)
+        plane_angle_deg(pc.planes[k], np.asarray(true.planes[true.plane_index(s)]))
+        for k, s in enumerate(pc.stripes)
     ]  # angle between estimated and true plane normals
     summary = {
         "poses": n_poses,
@@ -402,7 +391,11 @@ def _closed_loop(out: str, seed: int, n: int, log) -> dict | None:
     from ..sim.closed_loop import plot_closed_loop, run_closed_loop
 
     log(f"closed loop: {n} frames along a weld towards a T-intersection ...")
-    res = run_closed_loop(n_frames=n, seed=seed, progress=True)
+    # 220 mm before the T: the junction is in view almost at once, and the run ends 40
+    # frames after the turn (the stem, the T and the crossing weld in ≈ 260 frames)
+    res = run_closed_loop(
+        n_frames=n, seed=seed, progress=True, start_before_mm=220.0, after_turn_frames=40
+    )
     plot_closed_loop(res, os.path.join(out, "closed_loop.png"))
     keys = (
         "n_frames n_counted mean_error_mm max_error_mm steady_mean_error_mm steady_max_error_mm "

@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         sensor = load_sensor(args.calib) if args.calib else default_sensor()
+        sensor.require_planes(2, "rendering (the simulated projector is a cross)")
     except CalibrationError as e:
         return _usage_error(str(e))
     t0 = time.perf_counter()

@@ -7,6 +7,8 @@ Nothing here imports the simulation (`cslx.sim`): a robot without a renderer run
 - `tracker`: the runtime object: offset and heading of the weld line, Kalman-filtered.
 - `protocol`, `link`, `controller`: the binary serial protocol (PROTOCOL.md), the pyserial
   link with its watchdog, and the path controller.
+- `loop`: the one per-frame loop (tracker → controller → link, time, odometry, the log)
+  that `cslx track` and the closed-loop simulation both run.
 """
 
 from .controller import Command as Command
@@ -15,6 +17,10 @@ from .controller import PathController as PathController
 from .controller import State as State
 from .controller import wheel_speeds as wheel_speeds
 from .link import RobotLink as RobotLink
+from .loop import LoopConfig as LoopConfig
+from .loop import TrackingLoop as TrackingLoop
+from .loop import TrackLog as TrackLog
+from .loop import odometry_between as odometry_between
 from .pipeline import SUMMARY_FIELDS as SUMMARY_FIELDS
 from .pipeline import FrameResult as FrameResult
 from .pipeline import PipelineConfig as PipelineConfig
@@ -33,6 +39,7 @@ from .protocol import StopReason as StopReason
 from .protocol import VelocityCommand as VelocityCommand
 from .protocol import encode as encode
 from .tracker import LOG_FIELDS as LOG_FIELDS
+from .tracker import FrameGates as FrameGates
 from .tracker import KalmanConfig as KalmanConfig
 from .tracker import Tracker as Tracker
 from .weld import WeldConfig as WeldConfig
@@ -59,6 +66,7 @@ __all__ = [
     "stripe_feature",
     "weld_features",
     "weld_line_from_features",
+    "FrameGates",
     "KalmanConfig",
     "Tracker",
     "LOG_FIELDS",
@@ -68,6 +76,10 @@ __all__ = [
     "State",
     "wheel_speeds",
     "RobotLink",
+    "LoopConfig",
+    "TrackingLoop",
+    "TrackLog",
+    "odometry_between",
     "Ack",
     "Decoder",
     "Heartbeat",

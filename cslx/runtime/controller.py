@@ -19,10 +19,23 @@ term: the look-ahead alone still converges (ζ ≈ 0.94).
 
 Speed: v = v_nominal scaled by confidence between `min_confidence` (stop) and
 `full_confidence`; then limits on v, ω, their accelerations and each wheel's speed (the
-curvature is kept when a wheel saturates).
+curvature is kept when a wheel saturates). While the confidence falls from one update to the
+next the speed may not rise (in every state).
+
+Never blind. An update is a *confident observation* when it carries a finite offset with
+confidence ≥ `min_confidence`; in APPROACH_JUNCTION and TURN, where the horizontal stripe is
+expected to have left the followed bead (it runs `Rig.lookahead_mm` ahead, past the end of
+the stem), a frame whose stripe profile was measured (``sensor_ok``: not black, saturated,
+lost or stripe-less) or that sights the junction counts too — it confirms the plate ahead is
+where odometry says. After `blind_stop_s` (default 0.5 s) of updates without one, the
+command is an immediate stop (v = ω = 0) in every state; the state and the junction
+distance are kept, and the first confident observation resumes the manoeuvre. `dt` is the
+caller's measured time between frames (frame timestamps or the clock), never assumed.
 
 T-junction state machine:
-FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed`, the
+FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed` (default
+the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm ahead, 70
+sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
 junction distance x_j is dead-reckoned (x_j −= v dt) between sightings and reset by each
 sighting; when x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
 (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
@@ -38,6 +51,8 @@ import dataclasses
 import enum
 import math
 
+from ..config import MOTION
+
 __all__ = ["ControllerConfig", "Command", "PathController", "State", "wheel_speeds"]
 
 
@@ -51,7 +66,7 @@ class State(enum.Enum):
 class ControllerConfig:
     """Gains and limits (mm, s, rad)."""
 
-    v_nominal: float = 30.0
+    v_nominal: float = MOTION.speed_mm_s
     v_max: float = 60.0
     omega_max: float = 0.5
     accel_max: float = 60.0  # mm/s²
@@ -62,20 +77,22 @@ class ControllerConfig:
     k_heading: float = 0.05  # 1/s
     min_confidence: float = 0.2
     full_confidence: float = 0.6
-    approach_speed: float = 20.0
+    approach_speed: float = MOTION.speed_mm_s
     turn_direction: int = +1  # +1 left (CCW), −1 right
     turn_rate: float = 0.3  # rad/s during TURN
     turn_radius_mm: float = 0.0  # 0 = in place
     junction_tolerance_mm: float = 2.0
     junction_ignore_mm: float = 150.0
     junction_min_confidence: float = 0.3
+    blind_stop_s: float = 0.5  # s without a confident observation → stop
 
     def __post_init__(self):
         if self.turn_direction not in (-1, 1):
             raise ValueError(
                 f"turn_direction must be +1 (left) or -1 (right), got {self.turn_direction}"
             )
-        for name in ("v_max", "omega_max", "accel_max", "alpha_max", "wheel_max", "track_mm"):
+        names = ("v_max", "omega_max", "accel_max", "alpha_max", "wheel_max", "track_mm")
+        for name in (*names, "blind_stop_s"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         if not self.full_confidence > self.min_confidence:
@@ -122,10 +139,16 @@ class PathController:
         self._turn_start_heading: float | None = None
         self._ignore_left = 0.0
         self.turns_completed = 0
+        #: seconds since the last confident observation (module docstring, "Never blind")
+        self.blind_s = 0.0
+        self.blind_stops = 0
+        self._last_confidence = 0.0
+        self._cap = math.inf  # |v| may not exceed this in this update (confidence falling)
 
     def _limit(self, v_target: float, omega_target: float, dt: float) -> tuple[float, float]:
         c = self.config
-        v_target = _clip(v_target, -c.v_max, c.v_max)
+        cap = min(c.v_max, self._cap)
+        v_target = _clip(v_target, -cap, cap)
         omega_target = _clip(omega_target, -c.omega_max, c.omega_max)
         # wheel saturation: scale both to keep the curvature
         left, right = wheel_speeds(v_target, omega_target, c.track_mm)
@@ -157,24 +180,54 @@ class PathController:
         junction: bool = False,
         junction_x_mm: float = math.nan,
         robot_heading_rad: float | None = None,
+        sensor_ok: bool = False,
     ) -> Command:
         """One control step of `dt` seconds from the latest observation.
 
         Args:
-            dt: time since the previous update, s (> 0).
+            dt: measured time since the previous update, s (> 0, finite).
             offset_mm, heading_deg, confidence, junction, junction_x_mm: the observation
-                (docs/contracts.md tracking log meanings; NaN = unknown).
+                (docs/contracts.md tracking-log meanings; NaN = unknown).
             robot_heading_rad: measured robot heading (odometry), used to end the TURN;
                 without it the commanded ω is integrated.
+            sensor_ok: this frame's stripe profile was measured (the tracker's
+                `Observation.stripe_ok`); counts as a confident observation only in
+                APPROACH_JUNCTION and TURN (module docstring, "Never blind").
         """
-        if not dt > 0:
-            raise ValueError(f"dt must be positive, got {dt}")
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be positive and finite, got {dt}")
         c = self.config
         confidence = _finite(confidence)
         seen_offset = math.isfinite(offset_mm) if offset_mm is not None else False
         scale = _clip(
             (confidence - c.min_confidence) / (c.full_confidence - c.min_confidence), 0, 1
         )
+        sighted = (
+            bool(junction)
+            and math.isfinite(_finite(junction_x_mm, math.nan))
+            and self._ignore_left <= 0
+        )
+        confident = seen_offset and confidence >= c.min_confidence
+        if self.state is not State.FOLLOW:
+            confident = confident or bool(sensor_ok) or sighted
+        # speed may not rise on a frame that is not confident or less confident than the last.
+        # Dead-reckoning to a confirmed junction (APPROACH/TURN without a bead) the evidence
+        # is the measured plate: its confidence is 1 with a stripe profile, else 0 (a
+        # decaying bead confidence there would freeze the approach at a crawl).
+        evidence = confidence
+        if self.state is not State.FOLLOW and (not seen_offset or scale <= 0.0):
+            evidence = 1.0 if (sensor_ok or sighted) else 0.0
+        falling = evidence < self._last_confidence
+        self._last_confidence = evidence
+        self._cap = abs(self.v) if (falling or not confident) else math.inf
+        self.blind_s = 0.0 if confident else self.blind_s + dt
+        if self.blind_s > c.blind_stop_s:
+            if self.v != 0.0 or self.omega != 0.0:
+                self.blind_stops += 1
+            if self.state is State.TURN and robot_heading_rad is None:
+                self.turned += abs(self.omega) * dt  # the last interval's rotation
+            self._advance_junction(self.v, dt)
+            return self._emit(0.0, 0.0)  # blind: stop now, keep the state
 
         if self.state is State.TURN:
             if robot_heading_rad is not None:
@@ -201,7 +254,10 @@ class PathController:
 
         if self.state is State.APPROACH_JUNCTION and (not seen_offset or scale <= 0.0):
             # The horizontal stripe runs 150 mm ahead: near the T it has passed the end of
-            # the followed weld and sees no bead. Expected: go straight, dead-reckoning.
+            # the followed weld and sees no bead. Expected: go straight, dead-reckoning on
+            # odometry, while the frames confirm the plate (else the blind stop above).
+            if sighted:
+                self.junction_x = float(junction_x_mm)
             v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
             self._advance_junction(v, dt)
             if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:

@@ -19,8 +19,12 @@ their offsets dynamic (`lax.dynamic_slice`), so one compiled program serves ever
 `lax.cond` picks the band branch or the full-frame branch (on the CPU only the chosen branch
 runs). The MED filters of the bands are shorter (``L_roi``, a band is a short segment) and
 kept apart from the full-frame filters. A stripe that leaves its band, or too few centres,
-switches the next frame back to the full frame. Centres outside the band are reported as not
-found; inside it they agree with full-frame processing (tests/test_pipeline.py).
+switches the next frame back to a frame without tracking state. Such a frame (the first one
+too) takes its bands from a cheap first pass (the brightest sample of every column / row,
+`_first_pass`) and runs MED from the band filters to convergence there; only when the
+stripes do not fit the bands does it run MED on the full frame. Centres outside the band are
+reported as not found; inside it they agree with full-frame processing
+(tests/runtime/test_pipeline.py).
 
 Everything is pure JAX on one frame and jit-compiled at `process_frame`; `process_batch`
 vmaps it over frames (under vmap `lax.cond` evaluates both branches: archives should use
@@ -39,6 +43,7 @@ from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.med import default_filter_length, initial_filter, med
+from ..segmentation.shard import map_frames, platform_vmap_size
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .weld import WeldConfig, WeldFeature, weld_features
@@ -54,6 +59,7 @@ __all__ = [
     "SUMMARY_FIELDS",
     "stripe_points",
     "clean_profile",
+    "colour_sum",
 ]
 
 
@@ -70,16 +76,29 @@ class PipelineConfig(eqx.Module):
     roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
+    first_pass / first_pass_fraction: on a frame without tracking state (the first, or
+        after the stripes were lost) with the ROI allowed, locate the bands from the
+        brightest sample of each column / row (`_first_pass`) and run MED (from the band
+        filters in the state, up to ``max_steps``) and Steger in the bands when at least
+        ``first_pass_fraction`` of those samples fall inside them; otherwise, or with
+        ``roi=False``, the full frame. MED only where the stripe is (issue 13).
     min_valid_fraction: share of columns (rows) with a centre needed to keep tracking mode.
     median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
         (`clean_profile`: gross outliers out, light smoothing along the stripe).
     use_med: False skips MED (Steger on the monochrome image), for ablations.
-    roi_med: run MED inside the tracking bands too. Off by default: on bands of 64–192
-        samples MED's filter (L_roi 16–64, warm-started) shifted the sunny-frame centres by
-        a median 1.0–1.9 px where full-frame MED and Steger on the band both stay at
-        0.1–0.2 px (measured on rendered "sunny" frames); the short segments with their
-        tapered ends seem to defeat the delay estimate. With it off, tracking mode is Steger
-        on the colour-space band, warm state unused, and matches full-frame accuracy.
+    roi_med: run MED inside the tracking bands too (default on). Band MED used to be off:
+        on bands of 64–192 samples its filter shifted centres by 1.0–1.9 px. The cause was
+        the delay estimate, not the short segments: on short segments MED converges to a
+        one-sided, edge-enhancing filter, and the cross-correlation peak (exact only for a
+        symmetric filter) sits 1–2 px from where the detector sees the filtered ridge. With
+        ``med_delay="ridge"`` the delay is the measured displacement of the ridge itself
+        (`cslx.segmentation.med_fft.ridge_delay`): band centres then agree with full-frame
+        MED to a median 0.00–0.04 px on held-out rendered frames (issue 13).
+    med_delay: ``"ridge"`` (default; the ridge displacement at Steger's scale ``sigma``) or
+        ``"xcorr"`` (the correlation peak of `cslx.segmentation.med.med`'s default), for the
+        full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
+        centres 0.05–0.15 px off the ground truth where "ridge" and Steger on the colour
+        image stay within 0.05 px.
     weld: the bead detector's settings. The junction threshold is lowered to 0.1 (the
         detector's default is 0.3): on rendered T frames the crossing bead on the vertical
         stripe is found at the right x_r (±0.5 mm) with confidence 0.15–0.25, and no
@@ -100,12 +119,15 @@ class PipelineConfig(eqx.Module):
     roi_half_h: int = eqx.field(static=True, default=32)
     roi_half_w: int = eqx.field(static=True, default=64)
     roi_margin: int = eqx.field(static=True, default=8)
+    first_pass: bool = eqx.field(static=True, default=True)
+    first_pass_fraction: float = eqx.field(static=True, default=0.9)
     min_valid_fraction: float = eqx.field(static=True, default=0.5)
     median_half: int = eqx.field(static=True, default=4)
     outlier_mm: float = eqx.field(static=True, default=1.0)
     smooth_half: int = eqx.field(static=True, default=3)
     use_med: bool = eqx.field(static=True, default=True)
-    roi_med: bool = eqx.field(static=True, default=False)
+    roi_med: bool = eqx.field(static=True, default=True)
+    med_delay: str = eqx.field(static=True, default="ridge")
     weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
 
     def lengths(self, height: int, width: int) -> tuple[int, int]:
@@ -145,7 +167,8 @@ class FrameResult(NamedTuple):
     lightly smoothed; NaN where not valid or dropped). feature_h / feature_v:
     the beads (`cslx.runtime.weld.WeldFeature`); junction: the T-junction flag. med_steps: (2,)
     fixed-point steps (h, v); kurtosis: (2,) excess kurtosis of the MED outputs. used_roi:
-    the bands were processed (tracking mode). brightness: mean grey level of the frame
+    only the bands were processed (tracking mode, or the bands of the first pass on a frame
+    without tracking state). brightness: mean grey level of the frame
     (0..255); saturated: fraction of pixels with a channel at 255.
     """
 
@@ -189,7 +212,16 @@ def init_state(
 def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med):
     """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis)."""
     if use_med:
-        r = med(I, axis=axis, L=L, init=W0, tol=config.tol, max_steps=max_steps)
+        r = med(
+            I,
+            axis=axis,
+            L=L,
+            init=W0,
+            tol=config.tol,
+            max_steps=max_steps,
+            delay=config.med_delay,
+            ridge_sigma=config.sigma,
+        )
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
@@ -211,21 +243,18 @@ def _full(I, state: PipelineState, config: PipelineConfig):
     ch, Wh, sh, kh = _stripe(I, state.filter_h, 0, L_h, config, config.max_steps, config.use_med)
     cv, Wv, sv, kv = _stripe(I, state.filter_v, 1, L_v, config, config.max_steps, config.use_med)
     new = eqx.tree_at(lambda s: (s.filter_h, s.filter_v), state, (Wh, Wv))
-    return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new
+    return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new, jnp.zeros((), bool)
 
 
-def _bands(I, state: PipelineState, config: PipelineConfig):
+def _bands(I, state: PipelineState, config: PipelineConfig, max_steps=None):
+    max_steps = config.roi_max_steps if max_steps is None else max_steps
     height, width = I.shape
     hh, hw = 2 * config.roi_half_h, 2 * config.roi_half_w
     band_h = lax.dynamic_slice(I, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
     band_v = lax.dynamic_slice(I, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
     med_on = config.use_med and config.roi_med
-    ch, Wh, sh, kh = _stripe(
-        band_h, state.roi_filter_h, 0, config.L_roi, config, config.roi_max_steps, med_on
-    )
-    cv, Wv, sv, kv = _stripe(
-        band_v, state.roi_filter_v, 1, config.L_roi, config, config.roi_max_steps, med_on
-    )
+    ch, Wh, sh, kh = _stripe(band_h, state.roi_filter_h, 0, config.L_roi, config, max_steps, med_on)
+    cv, Wv, sv, kv = _stripe(band_v, state.roi_filter_v, 1, config.L_roi, config, max_steps, med_on)
     new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
     return (
         _shift(ch, state.row0),
@@ -233,6 +262,45 @@ def _bands(I, state: PipelineState, config: PipelineConfig):
         jnp.stack([sh, sv]),
         jnp.stack([kh, kv]),
         new,
+        jnp.ones((), bool),
+    )
+
+
+def _first_pass(I, state: PipelineState, config: PipelineConfig):
+    """Bands from a cheap first pass on a frame without tracking state: (state, fits).
+
+    The brightest sample of every column (row) of the monochrome image is a rough stripe
+    position; the bands are centred on their medians. They are used when nearly all of those
+    positions fall inside (the `_next_bands` rule: 98 %, away from the band edges); stray
+    maxima (the other stripe, a glint) are the few columns left out. Otherwise the frame
+    goes through full-frame MED.
+    """
+    height, width = I.shape
+    hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
+
+    def band(peaks, half, size):
+        centre = jnp.median(peaks.astype(I.dtype))
+        start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
+        lo = jnp.where(start == 0, -1, start + m)
+        hi = jnp.where(start == size - 2 * half, size, start + 2 * half - 1 - m)
+        inside = jnp.mean((peaks >= lo) & (peaks <= hi))
+        return start, inside >= config.first_pass_fraction
+
+    row0, ok_h = band(jnp.argmax(I, axis=0), hh, height)
+    col0, ok_v = band(jnp.argmax(I, axis=1), hw, width)
+    new = eqx.tree_at(lambda s: (s.row0, s.col0), state, (row0, col0))
+    return new, ok_h & ok_v
+
+
+def _cold(I, state: PipelineState, config: PipelineConfig):
+    """A frame without tracking: the bands of `_first_pass` if the stripes fit, else full."""
+    if not config.first_pass:
+        return _full(I, state, config)
+    banded, fits = _first_pass(I, state, config)
+    return lax.cond(
+        fits,
+        lambda: _bands(I, banded, config, config.max_steps),
+        lambda: _full(I, state, config),
     )
 
 
@@ -308,18 +376,15 @@ def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: Pipe
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     dtype = state.filter_h.dtype
-    x = rgb.astype(dtype)
-    I = x @ jnp.asarray(config.weights, dtype)
+    I = colour_sum(rgb, config.weights, dtype)
     if roi and config.roi_enabled(height, width):
-        ch, cv, steps, kurt, new = lax.cond(
+        ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,
             lambda: _bands(I, state, config),
-            lambda: _full(I, state, config),
+            lambda: _cold(I, state, config),
         )
-        used_roi = state.tracking
     else:
-        ch, cv, steps, kurt, new = _full(I, state, config)
-        used_roi = jnp.zeros((), bool)
+        ch, cv, steps, kurt, new, used_roi = _full(I, state, config)
     new = _next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
     Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)
@@ -335,10 +400,27 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
         med_steps=steps,
         kurtosis=kurt.astype(dtype),
         used_roi=used_roi,
-        brightness=jnp.mean(x),
+        brightness=jnp.mean(rgb.astype(dtype)),
         saturated=jnp.mean(jnp.any(rgb >= 255, axis=-1).astype(dtype)),
     )
     return result, new
+
+
+def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"]:
+    """Eq. (8), I = w_r R + w_g G + w_b B, as a channel-weighted sum over the static weights.
+
+    Zero weights are skipped; the same values as ``rgb.astype(dtype) @ w`` (a matrix
+    product over a length-3 axis), which XLA's CPU backend runs ≈ 3× slower
+    (results/bench_speed.md).
+    """
+    out = None
+    for c, w in enumerate(weights):
+        if w == 0:
+            continue
+        term = rgb[..., c].astype(dtype)
+        term = term if w == 1 else (-term if w == -1 else float(w) * term)
+        out = term if out is None else out + term
+    return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
 def _check_frame(sensor: Sensor, rgb) -> None:
@@ -384,9 +466,9 @@ def process_frame(
     return _process_frame(sensor, config, rgb, state, roi)
 
 
-@functools.partial(jax.jit, static_argnames=("roi",))
-def _process_batch(sensor, config, frames, state, roi):
-    return jax.vmap(lambda f: _process(sensor, config, f, state, roi))(frames)
+@functools.partial(jax.jit, static_argnames=("roi", "vmap_size"))
+def _process_batch(sensor, config, frames, state, roi, vmap_size):
+    return map_frames(lambda f: _process(sensor, config, f, state, roi), frames, vmap_size)
 
 
 def process_batch(
@@ -396,11 +478,15 @@ def process_batch(
     state: PipelineState | None = None,
     *,
     roi: bool = False,
+    vmap_size: int | None | str = "auto",
 ) -> tuple[FrameResult, PipelineState]:
-    """`process_frame` on independent frames (vmap), all starting from the same state.
+    """`process_frame` on independent frames, all starting from the same state.
 
     For archives of unrelated frames; the results carry a leading frame axis. The default
     state is `init_state` (cold, flat MED filters) and the full frame is processed.
+    ``vmap_size``: frames vectorised together (`cslx.segmentation.shard.map_frames`); "auto"
+    is one at a time (`lax.map`) on the CPU, where `vmap` made the per-frame cost grow with
+    the batch (99 → 141 ms from 1 to 16 frames, issue 13), and the whole batch elsewhere.
     """
     frames = jnp.asarray(frames)
     if frames.ndim != 4:
@@ -408,7 +494,9 @@ def process_batch(
     _check_frame(sensor, frames[0])
     if state is None:
         state = init_state(config, sensor.camera.image_size)
-    return _process_batch(sensor, config, frames, state, roi)
+    if vmap_size == "auto":
+        vmap_size = platform_vmap_size(d.platform for d in frames.devices())
+    return _process_batch(sensor, config, frames, state, roi, vmap_size)
 
 
 #: Names of the entries of `frame_summary`, in order.

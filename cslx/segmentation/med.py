@@ -47,7 +47,13 @@ Choices where the paper is vague:
   segments (weighted like R), refined on its band-limited interpolant (Newton on
   c'(d) = 0, unbiased for a symmetric response, unlike a 3-point parabola), and undone by a
   Fourier shift: the output is B(i + d), aligned with the input rows. The filter's sign is
-  fixed so that the correlation is positive (the stripe stays bright).
+  fixed so that the correlation is positive (the stripe stays bright). The correlation peak
+  is the delay of a symmetric (linear-phase) filter only; MED's filter is free, and on short
+  segments (the tracking bands) it becomes one-sided and edge-enhancing, whose ridge a
+  detector of scale σ sees 1–2 px from the correlation peak (issue 13; on full 640×480
+  frames 0.05–0.15 px). ``delay="ridge"`` measures the delay where it matters: the median
+  displacement of the stripe's ridge at scale σ from input to output segments
+  (`med_fft.ridge_delay`); the pipeline uses it.
 - Start (Table 2, step 1): ``init="flat"`` is W = 1/√L; ``"impulse"`` a unit impulse at
   L//2 (the usual MED start); an (L,) array warm-starts from the previous frame's filter.
   Table 2, step 2 cites "Equation (11)" for the output: it means eq. (18).
@@ -187,8 +193,18 @@ def _kurtosis_change(scaled_error):
     return jnp.abs(scaled_error[1]).astype(jnp.result_type(float))
 
 
+def _delay(W, st, pb, delay, ridge_sigma):
+    """(delay, sign) of the filter: correlation peak, optionally refined on the ridge."""
+    d, sign = _f.peak_delay(W, st.w, pb)
+    if delay == "ridge":
+        d = _f.ridge_delay(W, st, sign, d, pb, ridge_sigma)
+    elif delay != "xcorr":
+        raise ValueError(f"delay must be 'xcorr' or 'ridge', got {delay!r}")
+    return d, sign
+
+
 @eqx.filter_jit
-def _med(I, W0, axis, L, taper, tol, max_steps, loading):
+def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind="xcorr", ridge_sigma=2.0):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
 
     def step(y, args):
@@ -204,7 +220,7 @@ def _med(I, W0, axis, L, taper, tol, max_steps, loading):
     sol = optx.fixed_point(step, solver, y0, args=(pb, loading), max_steps=max_steps, throw=False)
     W = sol.value[0]
     st = _f.stats(W, pb)
-    delay, sign = _f.peak_delay(W, st.w, pb)
+    delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
     W = W * sign
     out = _f.shifted_output(W, delay, pb)
     out = out.T if axis == 0 else out
@@ -222,6 +238,8 @@ def med(
     max_steps: int = 30,
     taper: int = DEFAULT_TAPER,
     loading: float | None = None,
+    delay: Literal["xcorr", "ridge"] = "xcorr",
+    ridge_sigma: float = 2.0,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -237,6 +255,12 @@ def med(
         max_steps: iteration cap; ``converged`` says whether ``tol`` was met.
         taper: raised-cosine ramp length at the segment ends (border-spike guard).
         loading: diagonal loading of R relative to R_00 (default 1e-5 float32, 1e-9 float64).
+        delay: how the filter's delay is measured before it is undone: ``"xcorr"`` the peak
+            of the output/input cross-correlation (eqs. (25)–(26), correction 6; exact for a
+            symmetric filter); ``"ridge"`` the median displacement of the stripe's ridge
+            seen at scale ``ridge_sigma`` from input to output (`med_fft.ridge_delay`):
+            unbiased for the one-sided filters MED finds on short segments (bands).
+        ridge_sigma: detector scale of the ``"ridge"`` delay (Steger's σ downstream).
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -246,29 +270,42 @@ def med(
     L = _length(I, axis, L)
     W0 = initial_filter(init, L, I.dtype)
     loading = _default_loading(I.dtype) if loading is None else float(loading)
-    return _med(I, W0, axis, L, int(taper), float(tol), int(max_steps), loading)
+    if delay not in ("xcorr", "ridge"):
+        raise ValueError(f"delay must be 'xcorr' or 'ridge', got {delay!r}")
+    return _med(
+        I, W0, axis, L, int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma)
+    )
 
 
 @eqx.filter_jit
-def _apply(I, W, axis, taper):
+def _apply(I, W, axis, taper, delay_kind="xcorr", ridge_sigma=2.0):
     pb = med_prepare(I, axis=axis, L=W.shape[0], taper=taper)
     st = _f.stats(W, pb)
-    delay, sign = _f.peak_delay(W, st.w, pb)
+    delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
     out = _f.shifted_output(W * sign, delay, pb)
     return (out.T if axis == 0 else out), delay, st.excess
 
 
 def med_apply(
-    I: Float[Array, "h w"], W: Float[Array, " L"], *, axis: int = 0, taper: int = DEFAULT_TAPER
+    I: Float[Array, "h w"],
+    W: Float[Array, " L"],
+    *,
+    axis: int = 0,
+    taper: int = DEFAULT_TAPER,
+    delay: Literal["xcorr", "ridge"] = "xcorr",
+    ridge_sigma: float = 2.0,
 ) -> tuple[Float[Array, "h w"], Float[Array, ""], Float[Array, ""]]:
     """Filter a frame with a known MED filter (no iteration): (output, delay, kurtosis).
 
-    The tracking fast path: reuse the previous frame's filter, recompute only the delay.
+    The tracking fast path: reuse the previous frame's filter, recompute only the delay
+    (``delay`` as in `med`).
     """
     I = _check_image(I)
     W = jnp.asarray(W, I.dtype)
     _length(I, axis, W.shape[0])
-    return _apply(I, W, axis, int(taper))
+    if delay not in ("xcorr", "ridge"):
+        raise ValueError(f"delay must be 'xcorr' or 'ridge', got {delay!r}")
+    return _apply(I, W, axis, int(taper), delay, float(ridge_sigma))
 
 
 def med_objective(

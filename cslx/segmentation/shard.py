@@ -39,6 +39,8 @@ __all__ = [
     "extract_batch",
     "frame_mesh",
     "initialize_distributed",
+    "map_frames",
+    "platform_vmap_size",
     "place_frames",
     "process_archive",
 ]
@@ -95,16 +97,30 @@ def place_frames(batch: ArrayLike, mesh: Mesh) -> jax.Array:
     return jax.make_array_from_callback(batch.shape, sharding, lambda index: batch[index])
 
 
-def default_vmap_size(mesh: Mesh) -> int | None:
-    """Frames vmapped together per device: all of them on accelerators, one on the CPU.
+def platform_vmap_size(platforms) -> int | None:
+    """Frames vectorised together on devices of these platforms: 1 on the CPU, all elsewhere.
 
     On this 2-core CPU, `vmap` over frames made the per-frame cost of MED + Steger grow
     with the batch (52 → 121 ms/frame from 1 to 8 frames, `results/bench_scaling.csv`;
     `lax.map` over the same 8 frames was 2.2× faster than `vmap` in one run): the working
-    set of a batch leaves the cache. GPUs want the whole batch vectorised.
+    set of a batch leaves the cache, every fixed-point loop runs until the slowest frame
+    has converged, and `lax.cond` evaluates both branches. GPUs want the whole batch
+    vectorised.
     """
-    platforms = {d.platform for d in mesh.devices.flat}
-    return 1 if platforms == {"cpu"} else None
+    return 1 if set(platforms) == {"cpu"} else None
+
+
+def default_vmap_size(mesh: Mesh) -> int | None:
+    """Frames vmapped together per device of the mesh (`platform_vmap_size`)."""
+    return platform_vmap_size(d.platform for d in mesh.devices.flat)
+
+
+def map_frames(fn: Callable, frames, vmap_size: int | None = None):
+    """``fn`` over the leading axis: `vmap` (``vmap_size`` None or ≥ the batch) or `lax.map`
+    vectorising ``vmap_size`` frames at a time (frame by frame for 1). Traceable."""
+    if vmap_size is None or vmap_size >= frames.shape[0]:
+        return jax.vmap(fn)(frames)
+    return jax.lax.map(fn, frames, batch_size=vmap_size)
 
 
 @functools.lru_cache(maxsize=32)
@@ -116,9 +132,7 @@ def _compiled(fn: Callable, mesh: Mesh, vmap_size: int | None) -> Callable:
     """
 
     def local(frames):
-        if vmap_size is None or vmap_size >= frames.shape[0]:
-            return jax.vmap(fn)(frames)
-        return jax.lax.map(fn, frames, batch_size=vmap_size)
+        return map_frames(fn, frames, vmap_size)
 
     # check_vma=False: optimistix's fixed point builds its initial carry from constants,
     # which shard_map's varying-axis check would reject; every frame is independent here.

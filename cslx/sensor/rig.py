@@ -1,13 +1,16 @@
-"""The cross structured-light sensor: camera + two laser planes + camera-to-robot transform.
+"""The structured-light sensor: camera + one or two laser planes + camera-to-robot transform.
 
 Plane i is `a x + b y + c z + 1 = 0` in the camera frame, mm (eq. (1)). Triangulation
-follows docs/corrections.md, 3 (the paper's eq. (27) drops the depth): for the unit ray r
-of an undistorted pixel, the camera-frame point is X_c = −r / (n·r) with n = (a, b, c),
-and the robot-frame point is X_r = R_cr X_c + T_cr.
+follows correction 3 of docs/corrections.md (the paper's eq. (27) drops the depth): for the
+unit ray r of an undistorted pixel, the camera-frame point is X_c = −r / (n·r) with
+n = (a, b, c), and the robot-frame point is X_r = R_cr X_c + T_cr.
 
-The calibration file is the JSON of docs/contracts.md: `image_size` [w, h], `K` 3×3,
-`dist` [k1, k2, p1, p2], `rms_px`, `planes` [[a1,b1,c1],[a2,b2,c2]], `R_cr` 3×3,
-`T_cr` [3], plus optional extras that are kept verbatim.
+The paper's sensor is a cross (two planes: the horizontal stripe's first); a single line
+laser has one plane. `Sensor.stripes` says which stripe each row of `planes` belongs to;
+`triangulate` takes the stripe (or its index 0/1) and finds the row, and says clearly when
+the sensor has no plane for it. `Sensor.require_planes` is the check for users that need
+the cross (the tracker). The calibration file is `cslx.sensor.calibration_file`
+(docs/contracts.md).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ __all__ = [
     "plane_angle_deg",
 ]
 
-#: Table 4 of the paper with v0 corrected (docs/corrections.md, 2).
+#: Table 4 of the paper with v0 corrected (docs/corrections.md, correction 2).
 TABLE4_K = ((922.435, 0.0, 329.168), (0.0, 917.356, 270.566), (0.0, 0.0, 1.0))
 TABLE4_DIST = (-0.291459, 0.157027, -1.354e-4, -2.682e-4)
 
@@ -41,20 +44,70 @@ class CalibrationError(ValueError):
 
 
 class Sensor(eqx.Module):
-    """Camera, both laser planes and the camera-to-robot rigid transform.
+    """Camera, its laser planes (a cross: two; a line laser: one) and the camera-to-robot transform.
 
     Attributes:
         camera: intrinsics and distortion.
-        planes: (2, 3) plane coefficients (a, b, c): plane 0 makes the horizontal stripe
-            (one centre per image column), plane 1 the vertical stripe (one per row).
+        planes: (P, 3) plane coefficients (a, b, c), P = 1 or 2. With the default `stripes`,
+            row 0 makes the horizontal stripe (one centre per image column) and row 1 the
+            vertical stripe (one per row).
         R_cr: (3, 3) rotation camera → robot.
         T_cr: (3,) translation camera → robot, mm.
+        stripes: which stripe ("h" or "v") each row of `planes` draws; None (the default)
+            means ("h", "v")[:P], the calibration file's "horizontal first".
     """
 
     camera: Camera
-    planes: Float[Array, "2 3"]
+    planes: Float[Array, "p 3"]
     R_cr: Float[Array, "3 3"]
     T_cr: Float[Array, 3]
+    stripes: tuple[str, ...] | None = eqx.field(static=True, default=None)
+
+    @property
+    def plane_stripes(self) -> tuple[str, ...]:
+        """The stripe ("h"/"v") of each row of `planes`."""
+        if self.stripes is not None:
+            return tuple(self.stripes)
+        return ("h", "v")[: self.planes.shape[0]]
+
+    @property
+    def n_planes(self) -> int:
+        return int(self.planes.shape[0])
+
+    def has_plane(self, stripe) -> bool:
+        """Whether the sensor has a laser plane for `stripe` ("h"/"v", a `Stripe`, 0 or 1)."""
+        return _stripe_code(stripe) in self.plane_stripes
+
+    def plane_index(self, stripe) -> int:
+        """Row of `planes` of `stripe` ("h"/"v", a `cslx.config.Stripe`, or its index 0/1).
+
+        Raises:
+            CalibrationError: the sensor has no plane for that stripe (a one-line sensor).
+        """
+        code = _stripe_code(stripe)
+        have = self.plane_stripes
+        if code not in have:
+            raise CalibrationError(
+                f"this sensor has no laser plane for the {_LABEL[code]} stripe: its calibration "
+                f"holds {len(have)} plane(s), for the {' and '.join(_LABEL[c] for c in have)} "
+                "stripe; use that stripe, or calibrate with a laser that draws this one"
+            )
+        return have.index(code)
+
+    def require_planes(self, n: int, purpose: str) -> None:
+        """Raise `CalibrationError` with clear words unless the sensor has at least `n` planes.
+
+        For the users that need the cross (`purpose`, e.g. "tracking": the horizontal stripe
+        finds the weld, the vertical one the junctions ahead).
+        """
+        have = self.plane_stripes
+        if len(have) < n:
+            raise CalibrationError(
+                f"{purpose} needs {n} laser planes (the cross: horizontal and vertical stripe), "
+                f"but this calibration holds {len(have)} "
+                f"({', '.join(_LABEL[c] for c in have) or 'none'}); calibrate the cross "
+                "projector (`cslx calibrate --laser-images …` with both lines on the board)"
+            )
 
     def to_robot(self, X_c: Float[Array, "*b 3"]) -> Float[Array, "*b 3"]:
         """Camera-frame points → robot frame: X_r = R_cr X_c + T_cr."""
@@ -67,22 +120,40 @@ class Sensor(eqx.Module):
         return triangulate(self, uv, plane, robot_frame=robot_frame)
 
 
+_LABEL = {"h": "horizontal", "v": "vertical"}
+
+
+def _stripe_code(stripe) -> str:
+    """ "h" or "v" from a `Stripe`, "h"/"v"/"horizontal"/"vertical", or the index 0/1."""
+    from ..config import Stripe
+
+    try:
+        return Stripe.parse(int(stripe) if isinstance(stripe, np.integer) else stripe).value
+    except ValueError as e:
+        raise ValueError(f"plane/stripe: {e}") from None
+
+
 def triangulate(
-    sensor: Sensor, uv: Float[Array, "*b 2"], plane: int, *, robot_frame: bool = False
+    sensor: Sensor, uv: Float[Array, "*b 2"], plane, *, robot_frame: bool = False
 ) -> Float[Array, "*b 3"]:
     """Intersect the viewing rays of pixels with a laser plane (correction 3 of eq. (27)).
 
     Args:
         sensor: the calibrated sensor.
         uv: distorted pixel coordinates (OpenCV convention); NaN propagates.
-        plane: 0 for the horizontal stripe's plane, 1 for the vertical stripe's.
+        plane: the stripe whose plane to use: 0 or "h" (a `cslx.config.Stripe`) for the
+            horizontal stripe, 1 or "v" for the vertical one; mapped to the row of
+            `sensor.planes` by `Sensor.plane_index` (the same row for a cross sensor).
         robot_frame: return X_r = R_cr X_c + T_cr instead of the camera-frame point.
 
     Returns:
         3-D points in mm. A ray parallel to the plane gives a non-finite value.
+
+    Raises:
+        CalibrationError: a one-plane sensor asked for the stripe it has no plane for.
     """
     ray = pixel_to_ray(uv, sensor.camera, normalize=False)
-    n = sensor.planes[plane].astype(ray.dtype)
+    n = sensor.planes[sensor.plane_index(plane)].astype(ray.dtype)
     denom = ray @ n
     safe = jnp.where(denom == 0, jnp.ones_like(denom), denom)
     X_c = jnp.where((denom == 0)[..., None], jnp.nan, -ray / safe[..., None])
@@ -161,13 +232,27 @@ def default_sensor(dtype=None) -> Sensor:
     return sensor_from_arrays(TABLE4_K, TABLE4_DIST, planes, R_cr, T_cr, (640, 480), dtype=dtype)
 
 
-def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None) -> Sensor:
-    """Build a `Sensor` from plain arrays (no validation; see `load_sensor` for that)."""
+def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None, stripes=None) -> Sensor:
+    """Build a `Sensor` from plain arrays (no validation; see `load_sensor` for that).
+
+    `planes` is (P, 3) (a single (3,) plane is taken as P = 1); `stripes` names the stripe of
+    each row (default ("h", "v")[:P]).
+    """
     dtype = dtype or jnp.asarray(0.0).dtype
     camera = Camera.from_matrix(jnp.asarray(K, dtype), jnp.asarray(dist, dtype), image_size)
+    planes = jnp.asarray(planes, dtype).reshape(-1, 3)
+    if stripes is not None:
+        stripes = tuple(_stripe_code(s) for s in stripes)
+        if len(stripes) != planes.shape[0] or len(set(stripes)) != len(stripes):
+            raise CalibrationError(
+                f"stripes {list(stripes)} do not name the {planes.shape[0]} plane(s) one each"
+            )
+        if stripes == ("h", "v")[: planes.shape[0]]:
+            stripes = None  # the default order: keep one pytree structure for the cross
     return Sensor(
         camera=camera,
-        planes=jnp.asarray(planes, dtype),
+        planes=planes,
         R_cr=jnp.asarray(R_cr, dtype),
         T_cr=jnp.asarray(T_cr, dtype),
+        stripes=stripes,
     )

@@ -1,4 +1,4 @@
-"""Rendered calibration boards (chessboards with and without the laser cross on them)."""
+"""Rendered calibration boards: chessboards without and with the laser (a cross or one line)."""
 
 from __future__ import annotations
 
@@ -30,8 +30,18 @@ def _rodrigues(v):
     return np.eye(3) + math.sin(th) * K + (1 - math.cos(th)) * K @ K
 
 
-def _board_poses(sensor, n, rng, pattern, square, max_tries=20000):
-    """Random board→camera poses with the whole board in view and both stripes across it."""
+def _board_poses(
+    sensor,
+    n,
+    rng,
+    pattern,
+    square,
+    max_tries=20000,
+    lines=(0, 1),
+    distance_mm=(380.0, 540.0),
+    centre_px=((340.0, 430.0), (240.0, 300.0)),
+):
+    """Random board→camera poses with the whole board in view and the drawn stripes across it."""
     import cv2
 
     cols, rows = pattern
@@ -39,7 +49,7 @@ def _board_poses(sensor, n, rng, pattern, square, max_tries=20000):
     W, H = cam.image_size
     K = np.asarray(cam.K, float)
     dist = np.asarray(cam.dist, float)
-    planes = np.asarray(sensor.planes, float)
+    planes = np.asarray(sensor.planes, float)[list(lines)]
     # Inner corners plus half a square must be in view for the detector.
     outline = np.array(
         [[-0.5, -0.5, 0], [cols - 0.5, -0.5, 0], [-0.5, rows - 0.5, 0], [cols - 0.5, rows - 0.5, 0]]
@@ -54,10 +64,10 @@ def _board_poses(sensor, n, rng, pattern, square, max_tries=20000):
         R = _rodrigues(
             np.array([np.deg2rad(rng.uniform(-25, 25)), np.deg2rad(rng.uniform(-25, 25)), 0.0])
         ) @ _rodrigues(np.array([0.0, 0.0, np.deg2rad(rng.uniform(-10, 10))]))
-        z = rng.uniform(380, 540)
-        # Centre the board a little right of and below the image centre, where the cross
-        # projector's stripes fall at these distances.
-        u_c, v_c = rng.uniform(340, 430), rng.uniform(240, 300)
+        z = rng.uniform(*distance_mm)
+        # By default the board is centred a little right of and below the image centre,
+        # where the default cross projector's stripes fall at 380–540 mm.
+        u_c, v_c = rng.uniform(*centre_px[0]), rng.uniform(*centre_px[1])
         target = np.array([(u_c - K[0, 2]) * z / K[0, 0], (v_c - K[1, 2]) * z / K[1, 1], z])
         t = target - R @ centre
         uv = cv2.projectPoints(outline, cv2.Rodrigues(R)[0], t, K, dist)[0][:, 0]
@@ -74,8 +84,8 @@ def _board_poses(sensor, n, rng, pattern, square, max_tries=20000):
         if len(Rs) == n:
             return np.stack(Rs), np.stack(ts)
     raise RuntimeError(
-        f"found only {len(Rs)} of {n} board poses with the board in view and both stripes "
-        "across it; the sensor's projector may not reach the board at 380–540 mm"
+        f"found only {len(Rs)} of {n} board poses with the board in view and the stripes "
+        f"across it; the sensor's projector may not reach the board at {distance_mm} mm"
     )
 
 
@@ -99,8 +109,8 @@ def _grid_rays(sensor, ss):
 
 
 @eqx.filter_jit
-def _checker_kernel(sensor, ray, R, t, nz, key, laser_on, pattern, square, ss):
-    bg, laser = checkerboard_radiance(sensor, ray, R, t, laser_on, nz, pattern, square, ss)
+def _checker_kernel(sensor, ray, R, t, nz, key, laser_on, pattern, square, ss, lines):
+    bg, laser = checkerboard_radiance(sensor, ray, R, t, laser_on, nz, pattern, square, ss, lines)
     return quantise(expose(bg, laser, nz, key))
 
 
@@ -114,12 +124,19 @@ def render_calibration(
     nuisance: Nuisance | None = None,
     supersample: int = 6,
     progress: bool = False,
+    lines: tuple[str, ...] = ("h", "v"),
+    distance_mm: tuple[float, float] = (380.0, 540.0),
+    centre_px: tuple[tuple[float, float], tuple[float, float]] = ((340, 430), (240, 300)),
 ) -> dict[str, np.ndarray]:
     """Checkerboard images in random poses, each without and with the laser (paper, 2.3).
 
     The board (cols × rows inner corners at (i·square, j·square, 0), i fastest) is rendered
-    with `supersample`² rays per pixel through the distorted lens, 380–540 mm away, tilted
-    up to 25°, and posed so that both laser stripes cross its printed area.
+    with `supersample`² rays per pixel through the distorted lens, `distance_mm` away
+    (default 380–540 mm), its centre imaged within `centre_px` ((u range), (v range)), tilted
+    up to 25°, and posed so that the drawn laser stripes cross its printed area.
+
+    `lines` chooses the laser: ("h", "v") the sensor's cross, ("h",) or ("v",) a single line
+    laser drawing only that stripe's sheet (the sensor's plane of that stripe).
 
     Returns:
         `plain`, `laser` (F, H, W, 3) uint8; `R` (F, 3, 3), `t` (F, 3) the true board→camera
@@ -132,7 +149,13 @@ def render_calibration(
     cols, rows = pattern
     obj = np.zeros((cols * rows, 3))
     obj[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square_mm
-    Rs, ts = _board_poses(sensor, n_poses, rng, pattern, square_mm)
+    rows_on = tuple(sensor.plane_index(s) for s in lines)
+    if not rows_on:
+        raise ValueError("lines must name at least one stripe ('h', 'v')")
+    Rs, ts = _board_poses(
+        sensor, n_poses, rng, pattern, square_mm, lines=rows_on, distance_mm=distance_mm,
+        centre_px=centre_px,
+    )  # fmt: skip
     s32 = _as_f32(sensor)
     nz32 = _nz_arrays(nz)
     rays = _grid_rays(s32, int(supersample))
@@ -159,6 +182,7 @@ def render_calibration(
                         tuple(pattern),
                         float(square_mm),
                         supersample,
+                        rows_on,
                     )
                 )
             )

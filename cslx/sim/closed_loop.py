@@ -1,17 +1,17 @@
 """Closed-loop weld tracking: tracker, controller and a simulated robot over a real pty.
 
-The simulated differential-drive robot (`cslx.runtime.RobotSimulator`, on the far end of a
+The simulated differential-drive robot (`cslx.sim.robot.RobotSimulator`, on the far end of a
 real pseudo-terminal, lock-step mode) starts beside a weld (the stem) that ends at a
 T-intersection with a crossing weld (the bar). Every step:
 
 1. the frame its camera sees from the simulator's true pose is rendered with the nuisances
    (`cslx.sim.render_image`, default rig);
-2. the compiled tracker (`cslx.runtime.tracker.Tracker`) estimates the weld line, with the
-   odometry from the robot's telemetry received over the link;
-3. the path controller (`cslx.runtime.PathController`: follow, approach the junction, turn
-   90° left in place, follow the bar) computes (v, ω), sent over the link as a
-   VELOCITY_COMMAND (the observation goes too) and acknowledged by the robot;
-4. the simulator integrates 1/fps s of motion.
+2. the runtime's one per-frame loop (`cslx.runtime.loop.TrackingLoop`, the same object
+   `cslx track` drives) runs the compiled tracker with the odometry from the robot's
+   telemetry received over the link, the path controller (follow, approach the junction,
+   turn 90° left in place, follow the bar) and sends the observation and the
+   VELOCITY_COMMAND, which the robot acknowledges; the frame's time is the simulated time;
+3. the simulator integrates 1/fps s of motion.
 
 Lock-step: rendering a frame takes about a second on the CPU, so simulated time advances only
 when the loop says so, and the link's watchdog timeouts are raised accordingly.
@@ -32,6 +32,8 @@ import math
 import time
 
 import numpy as np
+
+from ..config import MOTION, Motion
 
 __all__ = ["plot_closed_loop", "run_closed_loop"]
 
@@ -86,12 +88,13 @@ def run_closed_loop(
     seed: int = 0,
     nuisance: str = "clean",
     *,
-    fps: float = 20.0,
+    fps: float = MOTION.fps,
     start_before_mm: float = 250.0,
     start_offset_mm: float = 4.0,
     start_heading_deg: float = 3.0,
     turn_rate: float = 0.5,
     settle_s: float = 5.0,
+    after_turn_frames: int | None = None,
     tracker=None,
     progress: bool = False,
     log=None,
@@ -107,6 +110,8 @@ def run_closed_loop(
         turn_rate: the controller's turning rate at the T, rad/s.
         settle_s: the "steady" statistics leave out the first settle_s seconds (the
             controller's response to the initial error, time constant ≈ 2.7 s).
+        after_turn_frames: end the run this many frames after the turn was completed
+            (None: run all `n_frames`).
         tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.
 
     Returns:
@@ -116,6 +121,7 @@ def run_closed_loop(
         tracker fps, loop fps without and with rendering.
     """
     from ..runtime import ControllerConfig, PathController, RobotLink, State, Tracker
+    from ..runtime.loop import LoopConfig, TrackingLoop
     from ..sensor import default_sensor
     from .render import render_image
     from .robot import RobotSimulator, SimulatorConfig
@@ -134,6 +140,7 @@ def run_closed_loop(
     t_loop = []
     t_render = []
     follow = 0
+    turned_at = None
     it = range(n_frames)
     if progress:
         from tqdm import tqdm
@@ -143,7 +150,12 @@ def run_closed_loop(
         RobotSimulator(pose=start, config=cfg) as sim,
         RobotLink(sim.port, stall_timeout_s=1e6, low_conf_timeout_s=1e6) as link,
     ):
-        last = None
+        loop = TrackingLoop(
+            tracker,
+            controller,
+            link,
+            config=LoopConfig(motion=Motion(MOTION.speed_mm_s, fps), ack_timeout_s=2.0),
+        )
         for i in it:
             pose = sim.pose()
             t0 = time.perf_counter()
@@ -158,34 +170,15 @@ def run_closed_loop(
                     link.latest_state is not None and link.latest_state.t_s >= sim.sim_time - 1e-6
                 )
             )
-            st = link.latest_state
-            odometry = None
-            if st is not None and last is not None:
-                c, s = math.cos(last[2]), math.sin(last[2])
-                d = (st.x_mm - last[0]) * c + (st.y_mm - last[1]) * s
-                dh = st.heading_rad - last[2]
-                odometry = (d, math.atan2(math.sin(dh), math.cos(dh)))
-            if st is not None:
-                last = (st.x_mm, st.y_mm, st.heading_rad)
-            obs = tracker.step(img, dt=dt, odometry=odometry, t=i * dt)
-            cmd = controller.update(
-                dt,
-                obs.offset_mm,
-                obs.heading_deg,
-                obs.confidence,
-                obs.junction,
-                obs.junction_x_mm,
-                robot_heading_rad=None if st is None else st.heading_rad,
-            )
-            link.send_observation(obs.to_message())
-            seq = link.send_command(cmd.v_mm_s, cmd.omega_rad_s)
-            if seq is not None:
-                link.wait_ack(seq, 2.0)
+            done = loop.step(img, f"sim:{i}", t=sim.sim_time)
+            obs, cmd = done.observation, done.command
             sim.advance(dt)
             t2 = time.perf_counter()
             t_render.append(t1 - t0)
             t_loop.append(t2 - t1)
             if controller.turns_completed > 0:
+                if follow == 0:
+                    turned_at = i
                 follow = 1
             truth = _truth(world, pose, sensor, follow, sizes)
             counted = (
@@ -213,9 +206,13 @@ def run_closed_loop(
                     status=obs.status,
                     counted=int(counted),
                     estimation_error_mm=obs.offset_mm - truth["true_offset_mm"],
+                    nuisance=str(nuisance),
                     **truth,
                 )
             )
+            if after_turn_frames is not None and turned_at is not None:
+                if i - turned_at >= after_turn_frames:
+                    break
     counted = [r for r in rows if r["counted"]]
     steady = np.array([r["tracking_error_mm"] for r in counted if r["t_s"] >= settle_s])
     err = np.array([r["tracking_error_mm"] for r in counted])
@@ -231,8 +228,9 @@ def run_closed_loop(
             bar_width_mm=sizes[2],
             bar_height_mm=sizes[3],
         ),
-        n_frames=n_frames,
+        n_frames=len(rows),
         n_counted=len(counted),
+        blind_stops=controller.blind_stops,
         mean_error_mm=float(err.mean()) if err.size else nan,
         p95_error_mm=float(np.percentile(err, 95)) if err.size else nan,
         max_error_mm=float(err.max()) if err.size else nan,
@@ -251,16 +249,23 @@ def run_closed_loop(
     )
 
 
-def plot_closed_loop(result: dict, path: str) -> None:
-    """Figure 22: the welds' centre lines and the robot's trail, and the error over time."""
+def plot_closed_loop(result: dict, path: str | None = None, axes=None, label: str = "") -> None:
+    """Figure 22: the welds' centre lines and the robot's trail, and the error over time.
+
+    Draws into `axes` (a pair) when given, else a new figure saved to `path`.
+    """
     import matplotlib
 
-    matplotlib.use("Agg")
+    if axes is None:
+        matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rows = result["rows"]
     w = result["welds"]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
+    if axes is None:
+        fig, (a, b) = plt.subplots(1, 2, figsize=(13, 5.2))
+    else:
+        fig, (a, b) = None, axes
     # the look-ahead point is drawn where it is on the followed weld (during the turn and
     # past the stem's end the stripe line meets the weld's extension far away)
     on = [r for r in rows if r["counted"]]
@@ -287,7 +292,7 @@ def plot_closed_loop(result: dict, path: str) -> None:
     a.set_ylim(lo_y, hi_y)
     a.set_xlabel("x_w (mm)")
     a.set_ylabel("y_w (mm)")
-    a.set_title("Welds (grey: beads) and the robot's trail")
+    a.set_title(f"{label}Welds (grey: beads) and the robot's trail", fontsize=9)
     a.legend(loc="best", fontsize=8)
     t = np.array([r["t_s"] for r in rows])
     err = np.array([r["tracking_error_mm"] if r["counted"] else np.nan for r in rows])
@@ -301,11 +306,12 @@ def plot_closed_loop(result: dict, path: str) -> None:
     b.set_xlabel("t (s)")
     b.set_ylabel("mm")
     b.set_title(
-        f"all: mean {result['mean_error_mm']:.2f}, max {result['max_error_mm']:.2f} mm; "
-        f"steady: mean {result['steady_mean_error_mm']:.2f}, "
-        f"max {result['steady_max_error_mm']:.2f} mm"
+        f"{label}mean {result['mean_error_mm']:.2f}, p95 {result['p95_error_mm']:.2f}, "
+        f"max {result['max_error_mm']:.2f} mm; turns {result['turns_completed']}",
+        fontsize=9,
     )
-    b.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    b.legend(fontsize=7)
+    if fig is not None:
+        fig.tight_layout()
+        fig.savefig(path, dpi=120)
+        plt.close(fig)

@@ -5,7 +5,9 @@ stable symlink to the slave device (like udev's /dev/serial/by-id links), so tha
 simulated link loss (`disconnect()` closes the pty, `reconnect()` opens a new one and moves
 the link) the same path works again. It speaks cslx.runtime.protocol:
 
-- VELOCITY_COMMAND → new wheel targets (unicycle or wheel mode), ACK;
+- VELOCITY_COMMAND → new wheel targets (unicycle or wheel mode), ACK; a command in an
+  undefined mode (or with non-finite values) is refused: the robot stops
+  (StopReason.FAULT) and answers ACK with status 1;
 - STOP → wheels to zero at once, ACK; a later command resumes;
 - HEARTBEAT → keeps the command timeout from firing;
 - it sends ROBOT_STATE telemetry every `state_period_s` (and after each `advance`), and
@@ -94,6 +96,8 @@ class RobotSimulator:
         self.received: list[tuple[float, int, object]] = []
         #: every stop executed: (sim time, StopReason code)
         self.stops: list[tuple[float, int]] = []
+        #: commands refused (undefined mode)
+        self.rejected = 0
         self._open_pty()
 
     # pty management ---------------------------------------------------------------------
@@ -272,9 +276,12 @@ class RobotSimulator:
                 self._last_contact = now
                 if msg.mode == VelocityCommand.WHEELS:
                     left, right = msg.a, msg.b
-                else:
+                elif msg.mode == VelocityCommand.UNICYCLE:
                     half = msg.b * self.config.track_mm / 2.0
                     left, right = msg.a - half, msg.a + half
+                else:  # an undefined mode: refuse it, and stop (the sender is confused)
+                    left = right = math.nan
+                    self.rejected += 1
                 if math.isfinite(left) and math.isfinite(right):
                     self._set_targets(left, right)
                     status = 0

@@ -336,11 +336,13 @@ def checkerboard_radiance(
     pattern: tuple[int, int],
     square: float,
     ss: int,
+    lines: tuple[int, ...] = (0, 1),
 ) -> tuple[Float[Array, "h w 3"], Float[Array, "h w"]]:
     """A printed checkerboard (board→camera X_c = R X_b + t) on a dark wall, ss×ss supersampled.
 
     `ray` holds the unit rays of the supersampled pixel grid (`pixel_grid`, `pixel_to_ray`),
-    computed once for all poses.
+    computed once for all poses. `lines`: the rows of `sensor.planes` whose sheets are on
+    (both for the cross; one for a single line laser).
 
     The board has (cols+1)×(rows+1) squares around the inner corners (i·square, j·square, 0)
     and a white margin of half a square.
@@ -364,7 +366,7 @@ def checkerboard_radiance(
     laser = jnp.zeros_like(tt)
     if laser_on:
         w0 = nz.sheet_fwhm_mm / 1.1774
-        for i in range(2):
+        for i in lines:
             n_i = sensor.planes[i]
             dist = (X_c @ n_i + 1) / jnp.linalg.norm(n_i)
             laser = laser + jnp.exp(-2 * (dist / w0) ** 2)

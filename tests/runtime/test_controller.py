@@ -72,7 +72,15 @@ def observe(pose, welds):
 
 
 def run_loop(
-    ctrl, pose, welds, steps, dt=0.05, use_heading=True, measured_heading=False, confidence=None
+    ctrl,
+    pose,
+    welds,
+    steps,
+    dt=0.05,
+    use_heading=True,
+    measured_heading=False,
+    confidence=None,
+    sensor_ok=True,
 ):
     trail, cmds = [pose], []
     for _ in range(steps):
@@ -81,7 +89,12 @@ def run_loop(
             obs["heading_deg"] = math.nan
         if confidence is not None:
             obs["confidence"] = confidence
-        cmd = ctrl.update(dt, **obs, robot_heading_rad=pose[2] if measured_heading else None)
+        cmd = ctrl.update(
+            dt,
+            **obs,
+            robot_heading_rad=pose[2] if measured_heading else None,
+            sensor_ok=sensor_ok,
+        )
         cmds.append(cmd)
         pose = integrate(pose, cmd.v_mm_s, cmd.omega_rad_s, dt)
         trail.append(pose)
@@ -182,3 +195,114 @@ def test_bad_config_and_dt():
         ControllerConfig(turn_direction=0)
     with pytest.raises(ValueError, match="dt"):
         PathController().update(0.0, 1.0)
+
+
+def _follow_at_speed(ctrl, steps=100):
+    run_loop(ctrl, (0.0, 0.0, 0.0), STRAIGHT, steps)
+    assert ctrl.v > 25.0
+
+
+@pytest.mark.parametrize("dt", [0.01, 0.05, 0.2])
+def test_blind_stop_after_measured_time(dt):
+    c = ControllerConfig()
+    ctrl = PathController(c)
+    _follow_at_speed(ctrl)
+    blind_t, cmds = 0.0, []
+    while blind_t < 2 * c.blind_stop_s:
+        cmds.append(ctrl.update(dt, math.nan, confidence=0.0, sensor_ok=True))
+        blind_t += dt
+        # never moving once more than blind_stop_s of measured time passed without a bead
+        if ctrl.blind_s > c.blind_stop_s:
+            assert cmds[-1].v_mm_s == 0.0 and cmds[-1].omega_rad_s == 0.0
+    assert all(b.v_mm_s <= a.v_mm_s for a, b in zip(cmds, cmds[1:], strict=False))
+    n_moving = sum(cmd.v_mm_s > 0 for cmd in cmds)
+    assert n_moving <= math.ceil(c.blind_stop_s / dt)
+    # the first confident observation resumes (from rest, within the acceleration limit)
+    cmd = ctrl.update(dt, 0.0, 0.0, confidence=0.9)
+    assert 0.0 < cmd.v_mm_s <= c.accel_max * dt + 1e-9 and ctrl.blind_s == 0.0
+
+
+def _approaching(ctrl, junction_x=300.0):
+    """Follow, then sight a junction `junction_x` mm ahead: APPROACH_JUNCTION at speed."""
+    _follow_at_speed(ctrl)
+    ctrl.update(0.05, 0.0, 0.0, 0.9, junction=True, junction_x_mm=junction_x)
+    assert ctrl.state is State.APPROACH_JUNCTION
+    for _ in range(20):
+        ctrl.update(0.05, 0.0, 0.0, 0.9)
+    assert ctrl.v > 5.0
+
+
+def test_approach_junction_stops_on_corrupt_frames_and_never_speeds_up():
+    c = ControllerConfig()
+    ctrl = PathController(c)
+    _approaching(ctrl)
+    v0, cmds, t = ctrl.v, [], 0.0
+    while t < 1.0:  # corrupt frames: no stripe at all (sensor_ok False), confidence 0
+        cmds.append(ctrl.update(0.05, math.nan, math.nan, 0.0, sensor_ok=False))
+        t += 0.05
+    assert all(cmd.v_mm_s <= v0 + 1e-12 for cmd in cmds)
+    assert all(b.v_mm_s <= a.v_mm_s for a, b in zip(cmds, cmds[1:], strict=False))
+    stopped = [cmd for cmd in cmds if cmd.v_mm_s == 0.0 and cmd.omega_rad_s == 0.0]
+    assert len(stopped) >= len(cmds) - math.ceil(c.blind_stop_s / 0.05)
+    assert ctrl.state is State.APPROACH_JUNCTION  # kept: it resumes when it sees again
+
+
+def test_approach_dead_reckons_over_measured_plate_and_turns():
+    ctrl = PathController()
+    _approaching(ctrl, junction_x=60.0)
+    states = set()
+    for _ in range(400):  # the stripe has left the stem: plate only, no bead
+        states.add(ctrl.update(0.05, math.nan, math.nan, 0.0, sensor_ok=True).state)
+    # turned; then FOLLOW without a bead on the crossing weld is blind again: stopped
+    assert State.TURN in states and ctrl.turns_completed == 1
+    assert ctrl.state is State.FOLLOW and ctrl.v == 0.0
+
+
+def test_turn_pauses_when_blind():
+    c = ControllerConfig()
+    ctrl = PathController(c)
+    _approaching(ctrl, junction_x=30.0)
+    while ctrl.state is not State.TURN:
+        ctrl.update(0.05, math.nan, math.nan, 0.0, sensor_ok=True)
+    for _ in range(10):
+        ctrl.update(0.05, math.nan, math.nan, 0.0, sensor_ok=True)
+    turned = ctrl.turned
+    cmds = [ctrl.update(0.05, math.nan, math.nan, 0.0, sensor_ok=False) for _ in range(30)]
+    assert cmds[-1].omega_rad_s == 0.0 and cmds[-1].v_mm_s == 0.0
+    limit = turned + c.turn_rate * (c.blind_stop_s + 0.05) + 1e-9
+    assert ctrl.state is State.TURN and ctrl.turned <= limit
+
+
+def test_speed_never_rises_while_confidence_falls():
+    import random
+
+    rng = random.Random(12)
+    ctrl = PathController()
+    prev_conf, prev_v = 0.0, 0.0
+    for _ in range(2000):
+        conf = min(1.0, max(0.0, prev_conf + rng.uniform(-0.15, 0.15)))
+        offset = rng.uniform(-3.0, 3.0) if rng.random() > 0.1 else math.nan
+        cmd = ctrl.update(0.05, offset, math.nan, conf)
+        if conf < prev_conf or not math.isfinite(offset):
+            assert abs(cmd.v_mm_s) <= abs(prev_v) + 1e-12
+        prev_conf, prev_v = conf, cmd.v_mm_s
+
+
+@pytest.mark.parametrize("dt", [math.nan, math.inf, -0.05])
+def test_dt_must_be_measured_and_finite(dt):
+    with pytest.raises(ValueError, match="dt"):
+        PathController().update(dt, 1.0)
+
+
+def test_approach_over_measured_plate_keeps_its_speed():
+    """Bead lost past the stem's end at a low speed: the plate is measured, so the approach
+    returns to approach_speed (braking-limited) instead of crawling."""
+    c = ControllerConfig()
+    ctrl = PathController(c)
+    _approaching(ctrl, junction_x=200.0)
+    for _ in range(10):  # the bead fades as the stripe nears the crossing weld
+        ctrl.update(0.05, 0.0, 0.0, 0.3)
+    slow = ctrl.v
+    for k in range(60):  # then no bead, plate measured; the tracker's confidence decays
+        cmd = ctrl.update(0.05, math.nan, math.nan, 0.3 * 0.85**k, sensor_ok=True)
+    assert slow < c.approach_speed and cmd.v_mm_s > slow + 5.0

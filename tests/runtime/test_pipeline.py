@@ -5,7 +5,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cslx.runtime.pipeline import PipelineConfig, _process, init_state, process_batch, process_frame
+from cslx.runtime.pipeline import (
+    PipelineConfig,
+    _process,
+    colour_sum,
+    init_state,
+    process_batch,
+    process_frame,
+)
 from cslx.sensor import default_sensor
 from cslx.sim import random_pose, random_world, render_frame
 
@@ -56,15 +63,26 @@ def test_roi_keeps_accuracy_and_batch_equals_frames(scene):
     state0 = init_state(config, sensor.camera.image_size)
     fulls = []
     for img, gt in frames:
-        full, state = process_frame(sensor, config, img, state0)
+        full, state = process_frame(sensor, config, img, state0, roi=False)
         fulls.append(full)
         assert not bool(full.used_roi) and bool(state.tracking)
-        roi, state2 = process_frame(sensor, config, img, state)
+        # a cold frame with the ROI allowed: bands from the first pass, MED converged there
+        first, state1 = process_frame(sensor, config, img, state0)
+        assert bool(first.used_roi) and not bool(state0.tracking) and bool(state1.tracking)
+        roi, state2 = process_frame(sensor, config, img, state1)
         assert bool(roi.used_roi) and bool(state2.tracking)
         (fh, fv), (rh, rv) = _pixel_error(full, gt), _pixel_error(roi, gt)
         # both well below a pixel; the bands are no worse than the full frame (+0.05 px slack)
         assert fh < 0.3 and fv < 0.3
         assert rh <= fh + 0.05 and rv <= fv + 0.05
+        # MED runs in the bands (issue 13) and is unbiased: the band centres are the full
+        # frame's centres (median difference within 0.05 px).
+        assert np.all(np.asarray(roi.med_steps) > 0)
+        for r in (first, roi):
+            for a, b in ((r.centres_h, full.centres_h), (r.centres_v, full.centres_v)):
+                both = np.asarray(a.valid & b.valid)
+                assert both.mean() > 0.9
+                assert abs(np.median(np.asarray(a.pos)[both] - np.asarray(b.pos)[both])) < 0.05
         assert np.asarray(roi.centres_h.valid).mean() > 0.95
         assert np.asarray(roi.centres_v.valid).mean() > 0.95
         assert abs(float(roi.feature_h.position) - gt["offset_mm"]) < 1.0
@@ -77,6 +95,15 @@ def test_roi_keeps_accuracy_and_batch_equals_frames(scene):
         np.testing.assert_allclose(
             np.asarray(batch.centres_h.pos[k])[ok], np.asarray(one.centres_h.pos)[ok], atol=1e-3
         )
+
+
+def test_colour_sum_equals_matrix_product():
+    rgb = np.random.default_rng(0).integers(0, 256, (6, 7, 3), dtype=np.uint8)
+    for w in ((1.0, -1.0, 0.0), (0.299, 0.587, 0.114), (0.0, 0.0, 0.0), (2.0, 0.0, -0.5)):
+        ref = rgb.astype(np.float32) @ np.asarray(w, np.float32)
+        got = colour_sum(jnp.asarray(rgb), w, jnp.float32)
+        assert got.dtype == jnp.float32
+        np.testing.assert_allclose(np.asarray(got), ref, rtol=1e-6, atol=1e-4)
 
 
 def test_black_frame_keeps_state_finite(scene):

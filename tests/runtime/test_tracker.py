@@ -118,3 +118,36 @@ def test_closed_loop_short(tracker):
     assert res["mean_abs_estimation_error_mm"] < 1.0
     errs = [r["tracking_error_mm"] for r in res["rows"]]
     assert np.mean(errs[-5:]) < np.mean(errs[:5])
+
+
+def test_gate_reacquires_after_consistent_rejections():
+    """A wrong prediction locks the truth out; three agreeing centres restart the filter."""
+    rng = np.random.default_rng(4)
+    c = KalmanConfig()
+    kf = _WeldLineFilter(c, 150.0)
+    for _ in range(30):  # settled on a weld at y = 0
+        kf.predict(1.5, 0.0)
+        kf.update(150.0, rng.normal(0, 0.1), 0.8)
+    assert abs(kf.x[0]) < 0.3
+    accepted = []
+    for _ in range(6):  # the weld now seen 6 mm away (a new weld, or a lateral jump)
+        kf.predict(1.5, 0.0)
+        accepted.append(kf.update(150.0, 6.0 + rng.normal(0, 0.1), 0.8))
+    assert accepted[: c.reset_after - 1] == [False] * (c.reset_after - 1)
+    assert accepted[c.reset_after - 1] and kf.restarts == 1
+    assert abs(kf.x[0] - 6.0) < 0.5
+
+
+def test_gate_does_not_restart_on_disagreeing_clutter():
+    rng = np.random.default_rng(5)
+    c = KalmanConfig()
+    kf = _WeldLineFilter(c, 150.0)
+    for _ in range(30):
+        kf.predict(1.5, 0.0)
+        kf.update(150.0, rng.normal(0, 0.1), 0.8)
+    for k in range(c.give_up_after - 1):  # outliers that do not agree with each other
+        kf.predict(1.5, 0.0)
+        assert not kf.update(150.0, (8.0 + 3 * k) * (-1) ** k, 0.8)
+    assert kf.restarts == 0 and abs(kf.x[0]) < 0.5
+    kf.predict(1.5, 0.0)
+    assert kf.update(150.0, 30.0, 0.8) and kf.restarts == 1  # gives up: restarts anyway

@@ -231,3 +231,46 @@ def test_oblique_weld_still_centred():
     y_true = 4.0 + np.tan(np.radians(8.0)) * (float(f.centre[0]) - 150.0)
     assert abs(float(f.position) - y_true) < 0.3
     assert abs(float(f.width) - 15.0 / np.cos(np.radians(8.0))) < 1.5
+
+
+def _vertical_along_weld(rng, e, theta_deg, width, height, y_v=0.0, n=480, noise=0.05):
+    """The vertical stripe (x 90…210 at y ≈ y_v) over a weld y = e + tan θ (x − 150)."""
+    x = np.linspace(210.0, 90.0, n)
+    y = y_v - 0.0637 * (x - 150.0)
+    d = (y - e - np.tan(np.radians(theta_deg)) * (x - 150.0)) * np.cos(np.radians(theta_deg))
+    z = _plate_z(x, y, PLATE) + _bead_height(d, width, height)
+    pts = np.stack([x, y, z + rng.normal(0, noise, n)], -1)
+    pts[rng.random(n) < 0.05] = np.nan
+    return pts
+
+
+@pytest.mark.parametrize(
+    "e, theta, width, height",
+    [(4.0, 3.0, 16.0, 2.0), (-5.0, -2.5, 14.0, 2.5), (3.0, -4.0, 20.0, 1.5), (-6.0, 1.5, 12.0, 2)],
+)
+def test_heading_from_vertical_stripe(e, theta, width, height):
+    from cslx.runtime.weld import heading_from_vertical
+
+    rng = np.random.default_rng([int(100 + 10 * theta), int(100 + e)])
+    ph, valid, apex = horizontal_profile(rng, e, width, height, weld_angle_deg=theta)
+    ph = np.where(valid[:, None], ph, np.nan)
+    pv = _vertical_along_weld(rng, e, theta, width, height)
+    est, sd = heading_from_vertical(ph, pv, apex[1], width, 150.0)
+    assert abs(est - theta) < 1.5 and 0 < sd < 1.0
+
+
+def test_heading_from_vertical_stripe_unseen_or_ambiguous():
+    from cslx.runtime.weld import heading_from_vertical
+
+    rng = np.random.default_rng(3)
+    ph, valid, apex = horizontal_profile(rng, 40.0, 14.0, 2.0, weld_angle_deg=2.0)
+    ph = np.where(valid[:, None], ph, np.nan)
+    # the vertical stripe 40 mm beside the weld sees bare plate only: no heading
+    far = _vertical_along_weld(rng, 40.0, 2.0, 14.0, 2.0, y_v=0.0)
+    assert np.isnan(heading_from_vertical(ph, far, apex[1], 14.0, 150.0)[0])
+    # centred on the crown, ±θ explain the heights equally well: no heading
+    ph, valid, apex = horizontal_profile(rng, 0.0, 16.0, 2.0, weld_angle_deg=3.0)
+    ph = np.where(valid[:, None], ph, np.nan)
+    mirror = _vertical_along_weld(rng, 0.0, 3.0, 16.0, 2.0)
+    est, _ = heading_from_vertical(ph, mirror, apex[1], 16.0, 150.0)
+    assert np.isnan(est) or abs(est - 3.0) < 0.3

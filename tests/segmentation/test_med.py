@@ -313,6 +313,48 @@ def test_border_spike_guard():
     assert float(bare.kurtosis) > float(res.kurtosis)  # the trivial solution is "better"
 
 
+def steger_rows(B):
+    from cslx.segmentation.steger import steger_centres
+
+    c = steger_centres(jnp.asarray(B), sigma=2.0, axis=0)
+    return np.where(np.asarray(c.valid), np.asarray(c.pos), np.nan)
+
+
+@pytest.mark.parametrize("taps", [(-0.3, -0.45, 0.85), (-0.2, -0.35, -0.45, 0.8)])
+def test_ridge_delay_is_unbiased_for_a_one_sided_filter(taps):
+    """The band bias of issue 13: for a one-sided (edge-enhancing) filter the correlation
+    peak is not where the detector sees the filtered ridge; the ridge delay is."""
+    h, w = 64, 96
+    truth = 26.0 + 0.137 * np.arange(w) + 2 * np.sin(np.arange(w) / 11)
+    I = jnp.asarray(stripe_image(h, w, truth, sigma=1.0, ramp=0.0, speckle=0.1, seed=3))
+    assert abs(np.nanmedian(steger_rows(I) - truth)) < 0.02  # the detector itself is unbiased
+    W = np.zeros(16)
+    W[4 : 4 + len(taps)] = taps
+    W = jnp.asarray(W / np.linalg.norm(W))
+    out_x, d_x, _ = med_apply(I, W, delay="xcorr")
+    out_r, d_r, _ = med_apply(I, W, delay="ridge")
+    err_x = np.nanmedian(steger_rows(out_x) - truth)
+    err_r = np.nanmedian(steger_rows(out_r) - truth)
+    assert abs(err_x) > 0.3  # the old estimate is off by a large fraction of a pixel
+    assert abs(err_r) < 0.05
+    assert abs(float(d_r) - float(d_x)) == pytest.approx(abs(err_x - err_r), abs=0.02)
+
+
+def test_band_med_agrees_with_full_frame_med():
+    """MED on a 64-row band (short segments, L = 16) gives the full frame's centres."""
+    H, w = 160, 96
+    truth = 70.0 + 0.137 * np.arange(w) + 2 * np.sin(np.arange(w) / 11)
+    I = jnp.asarray(stripe_image(H, w, truth, speckle=0.3, seed=4))
+    full = med(I, delay="ridge")
+    c_full = steger_rows(full.output)
+    s0 = 48
+    band = med(I[s0 : s0 + 64], L=16, delay="ridge", max_steps=60)
+    c_band = steger_rows(band.output) + s0
+    assert np.mean(np.isfinite(c_band)) > 0.95
+    assert abs(np.nanmedian(c_band - c_full)) < 0.05
+    assert abs(np.nanmedian(c_band - truth)) < 0.05 and abs(np.nanmedian(c_full - truth)) < 0.05
+
+
 # ---------------------------------------------------------------- dtypes and errors
 
 
@@ -343,3 +385,5 @@ def test_bad_inputs_raise_clear_errors():
         med(I, init="dirac")
     with pytest.raises(ValueError, match="initial filter"):
         med(I, L=5, init=np.ones(4))
+    with pytest.raises(ValueError, match="delay"):
+        med(I, L=5, delay="peak")

@@ -121,3 +121,60 @@ def test_unreadable_calibration_files(tmp_path):
     p.write_text("{not json")
     with pytest.raises(CalibrationError, match="not valid JSON"):
         load_sensor(p)
+
+
+def test_one_plane_sensor_round_trip_and_triangulation(tmp_path):
+    """A line laser's calibration: one plane, named by `stripes`; the other stripe refused."""
+    from cslx.sensor import sensor_from_arrays
+
+    cross = default_sensor()
+    cam = cross.camera
+    one = sensor_from_arrays(
+        cam.K, cam.dist, cross.planes[1:], cross.R_cr, cross.T_cr, cam.image_size, stripes=["v"]
+    )
+    assert one.n_planes == 1 and one.plane_stripes == ("v",)
+    assert one.has_plane("v") and not one.has_plane(0)
+    uv = jnp.array([[400.0, 100.0], [410.0, 300.0]])
+    np.testing.assert_allclose(
+        np.asarray(triangulate(one, uv, "v")), np.asarray(triangulate(cross, uv, 1)), rtol=1e-12
+    )
+    jitted = jax.jit(triangulate, static_argnums=2)(one, uv, 1)
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(triangulate(cross, uv, 1)))
+    with pytest.raises(CalibrationError, match="no laser plane for the horizontal stripe"):
+        triangulate(one, uv, 0)
+    with pytest.raises(CalibrationError, match="tracking needs 2 laser planes"):
+        one.require_planes(2, "tracking")
+    cross.require_planes(2, "tracking")
+    path = tmp_path / "line.json"
+    save_sensor(one, path, rms_px=0.1)
+    data = json.loads(path.read_text())
+    assert data["stripes"] == ["v"] and len(data["planes"]) == 1
+    assert "plane_angle_deg" not in data
+    back = load_sensor(path)
+    assert back.plane_stripes == ("v",)
+    np.testing.assert_allclose(np.asarray(back.planes), np.asarray(one.planes))
+    # Without "stripes", one plane is the horizontal stripe's (horizontal first).
+    data.pop("stripes")
+    path.write_text(json.dumps(data))
+    assert load_sensor(path).plane_stripes == ("h",)
+
+
+@pytest.mark.parametrize(
+    "mutate, message",
+    [
+        (lambda d: d.__setitem__("planes", []), "one plane .* or two"),
+        (lambda d: d.__setitem__("planes", d["planes"] * 2), "got 4"),
+        (lambda d: d.__setitem__("stripes", ["v", "v"]), "'stripes' must name"),
+        (lambda d: d.__setitem__("stripes", ["h"]), "'stripes' must name"),
+        (lambda d: (d.pop("planes"), d.__setitem__("camera_only", True)), "camera-only"),
+        (lambda d: d.pop("planes"), "no laser calibration"),
+    ],
+)
+def test_bad_plane_sets_named(tmp_path, mutate, message):
+    with pytest.raises(CalibrationError, match=message):
+        load_sensor(_corrupt(tmp_path, mutate))
+
+
+def test_directory_as_calibration_file(tmp_path):
+    with pytest.raises(CalibrationError, match="is a directory"):
+        load_sensor(tmp_path)
