@@ -1,16 +1,9 @@
 """The baselines of Table 6: centre of mass (CM) and split-and-merge LA / QA / AA.
 
-<<<<<<< HEAD
-All work on one monochrome frame and return the `Centres` of `cslx.segmentation.steger` (one
-centre per column for a horizontal stripe, `axis=0`; per row for a vertical stripe, `axis=1`),
-so that experiments can loop over methods. They are NumPy/SciPy: split-and-merge is
-sequential by nature (DESIGN.md, "Baselines of Table 6").
-=======
 All work on one monochrome frame and return the `Centres` of `steger` (one centre per
 column for a horizontal stripe, `axis=0`; per row for a vertical stripe, `axis=1`), so that
 experiments can loop over methods. They are NumPy/SciPy: split-and-merge is sequential by
 nature (docs/corrections.md; Usamentiaga et al. 2012).
->>>>>>> main
 
 - **CM**: in each column, the centre of mass of the intensity above a threshold, in a
   window around the column's maximum.
