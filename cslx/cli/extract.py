@@ -12,6 +12,12 @@ in which every image failed leaves no file (a previous one stays as it was). On 
 summary line gives the images, the centres per stripe and the colour weights used (the ones
 `--space auto` chose).
 
+The default method "linked" (issue 11: candidate ridges linked along the stripe, clipped cores,
+width-aware σ; evidence in results/robust_extraction.md) adds the optional columns `sigma_px`
+(predicted standard deviation of the centre along the search axis, px) and `saturated` (1: the
+centre of a clipped core, taken from the plateau's flanks). The paper's MED + Steger is
+`--method med` (Table 6).
+
 Images are decoded in a thread pool ahead of the compute (OpenCV releases the GIL), and the
 rows of each image are formatted in one call, so that reading and writing overlap the
 segmentation instead of adding to it.
@@ -33,7 +39,9 @@ import time
 NAME = "extract"
 HELP = "stripe centres of images → centre CSV (CM, LA, QA, AA, Steger, MED + Steger)"
 
-METHODS = ("cm", "la", "qa", "aa", "steger", "med")
+METHODS = ("cm", "la", "qa", "aa", "steger", "med", "linked")
+#: Default method: the linked detector (`cslx.segmentation.robust`, issue 11).
+DEFAULT_METHOD = "linked"
 #: Images decoded ahead of the one being segmented, and the decoding threads.
 READ_AHEAD = 8
 READ_THREADS = 1  # one decoder keeps ahead of the compute; more compete with XLA on 2 cores
@@ -42,12 +50,16 @@ READ_THREADS = 1  # one decoder keeps ahead of the compute; more compete with XL
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("images", nargs="+", metavar="IMAGE", help="image files (PNG, JPEG, …)")
     parser.add_argument(
-        "--method", choices=METHODS, default="med", help="segmentation method (default: med)"
+        "--method",
+        choices=METHODS,
+        default=DEFAULT_METHOD,
+        help=f"segmentation method (default: {DEFAULT_METHOD}; the paper's: med)",
     )
     parser.add_argument(
         "--space",
-        default="r-g",
-        help="colour space: r, r-g, gray, auto (kurtosis search) or W_R,W_G,W_B (default r-g)",
+        default=None,
+        help="colour space: r, r-g, gray, auto (kurtosis search) or W_R,W_G,W_B "
+        "(default: auto for linked, r-g for the others)",
     )
     parser.add_argument(
         "--stripe",
@@ -59,7 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sigma",
         type=float,
         default=None,
-        help="Steger's Gaussian scale in pixels, > 0 (default 2; steger and med only)",
+        help="Steger's Gaussian scale in pixels, > 0 (default 2 for steger and med; linked: "
+        "from the measured stripe width)",
     )
     parser.add_argument("--calib", metavar="FILE", help="calibration JSON: adds x,y,z in mm")
     parser.add_argument("--out", metavar="FILE.csv", required=True, help="centre CSV to write")
@@ -124,7 +137,7 @@ def _csv_field(text: str) -> str:
     return text
 
 
-def format_rows(path: str, stripe: str, uv, xyz=None) -> str:
+def format_rows(path: str, stripe: str, uv, xyz=None, extra=None) -> str:
     """The CSV rows of one image's centres, `image,stripe,u,v[,x,y,z]`, in one string.
 
     Equal, byte for byte, to `csv.writer` rows of `f"{value:.4f}"` fields (lines end in
@@ -138,7 +151,11 @@ def format_rows(path: str, stripe: str, uv, xyz=None) -> str:
     cols = [uv] if xyz is None else [uv, np.asarray(xyz, float)]
     values = np.concatenate(cols, axis=1)
     prefix = f"{_csv_field(path)},{stripe},".replace("%", "%%")
-    line = prefix + ",".join(["%.4f"] * values.shape[1]) + "\r\n"
+    fields = ["%.4f"] * values.shape[1]
+    if extra is not None:  # linked: sigma_px (%.4f) and saturated (0/1)
+        values = np.concatenate([values, np.asarray(extra, float)], axis=1)
+        fields += ["%.4f", "%d"]
+    line = prefix + ",".join(fields) + "\r\n"
     return (line * len(values)) % tuple(values.ravel().tolist())
 
 
@@ -161,6 +178,8 @@ def run(args: argparse.Namespace) -> int:
         return _usage_error(f"--out {args.out}: is one of the input images; choose another name")
     from ..segmentation.colour import parse_space
 
+    if args.space is None:
+        args.space = "auto" if args.method == "linked" else "r-g"
     try:
         space = parse_space(args.space)
     except ValueError as err:
@@ -202,8 +221,10 @@ def _extract(args, space, stripes, sensor) -> int:
     from ..files import atomic_write
     from ..segmentation import DEFAULT_SIGMA
 
-    sigma = args.sigma if args.sigma is not None else DEFAULT_SIGMA
+    linked = args.method == "linked"
+    sigma = args.sigma if args.sigma is not None or linked else DEFAULT_SIGMA
     header = ["image", "stripe", "u", "v"] + (["x", "y", "z"] if sensor is not None else [])
+    header += ["sigma_px", "saturated"] if linked else []
     stats = _Stats(stripes)
     t0 = time.perf_counter()
     batched = _sharded_path(args)
@@ -302,24 +323,36 @@ def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats) -> 
     for stripe in stripes:
         kw = {} if method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
         try:
-            mono, weights = monochrome_for(rgb, space, stripe)
-            centres = extract(mono, method, stripe=stripe, **kw)
+            if method == "linked":  # needs the RGB frame (clipped pixels)
+                from ..segmentation.robust import search_space_unclipped
+
+                weights = space
+                if space == "auto":
+                    weights = search_space_unclipped(rgb, 0 if stripe == "h" else 1)
+                centres = extract(rgb, method, space=weights, stripe=stripe, **kw)
+            else:
+                mono, weights = monochrome_for(rgb, space, stripe)
+                centres = extract(mono, method, stripe=stripe, **kw)
         except Exception as err:  # one bad frame must not lose the others
             print(f"cslx extract: {path}: stripe {stripe}: {err}", file=sys.stderr)
             continue
         stats.weights[stripe].append(np.asarray(weights, float))
         uv = centres_to_pixels(centres, stripe)
-        uv = uv[np.all(np.isfinite(uv), axis=1)]
+        ok = np.all(np.isfinite(uv), axis=1)
+        uv = uv[ok]
+        extra = None
+        if centres.sigma is not None and method == "linked":
+            extra = np.stack([np.asarray(centres.sigma), np.asarray(centres.saturated)], 1)[ok]
         stats.centres[stripe].append(len(uv))
         found += len(uv)
-        _write_block(out, path, stripe, uv, sensor)
+        _write_block(out, path, stripe, uv, sensor, extra)
     if found == 0:
         stats.fail(path, "no stripe found")
     else:
         stats.ok += 1
 
 
-def _write_block(out, path, stripe, uv, sensor) -> None:
+def _write_block(out, path, stripe, uv, sensor, extra=None) -> None:
     import numpy as np
 
     if len(uv) == 0:
@@ -329,7 +362,7 @@ def _write_block(out, path, stripe, uv, sensor) -> None:
         from ..sensor import triangulate
 
         xyz = np.asarray(triangulate(sensor, uv, 0 if stripe == "h" else 1))
-    out.write(format_rows(path, stripe, uv, xyz))
+    out.write(format_rows(path, stripe, uv, xyz, extra))
 
 
 # ------------------------------------------- several devices (cslx.segmentation.shard)

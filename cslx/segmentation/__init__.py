@@ -4,6 +4,8 @@
 - `med`: minimum entropy deconvolution as an optimistix fixed point (eqs. (18), (22)–(26)).
 - `steger`: sub-pixel ridge centres (Steger 1998), batched.
 - `baselines`: CM / LA / QA / AA of the paper's Table 6.
+- `ridges`, `robust`: the robust detector of issue 11 (method "linked"): candidate ridges
+  linked into one path, clipped cores, width-aware σ, a predicted std per centre.
 - `interface`: `extract`, one interface over every method; `metrics`: the error metrics
   of docs/metrics.md.
 - `shard`: the same over frame batches and devices.
@@ -41,6 +43,9 @@ from .med import med_update as med_update
 from .metrics import GROSS_MM as GROSS_MM
 from .metrics import stripe_errors as stripe_errors
 from .metrics import stripe_point_errors as stripe_point_errors
+from .ridges import LinkParams as LinkParams
+from .ridges import linked_centres as linked_centres
+from .robust import linked_extract as linked_extract
 from .steger import Centres as Centres
 from .steger import gaussian_derivative as gaussian_derivative
 from .steger import sigma_for_width as sigma_for_width
@@ -66,6 +71,9 @@ __all__ = [
     "default_filter_length",
     "initial_filter",
     "Centres",
+    "LinkParams",
+    "linked_centres",
+    "linked_extract",
     "gaussian_derivative",
     "sigma_for_width",
     "steger_centres",

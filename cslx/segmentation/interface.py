@@ -7,6 +7,11 @@ stripe) or per-row (vertical stripe) centres with any of `METHODS`:
 - ``"steger"``: Steger's detector (`cslx.segmentation.steger`) on the monochrome image, no MED;
 - ``"med"``: the paper's full method (sections 3.1–3.3): MED along the stripe's search
   direction (`med.med`, delay-compensated output aligned with the image), then Steger.
+- ``"linked"``: the robust detector of issue 11 (`cslx.segmentation.robust`): clip-aware colour
+  search, clipped cores filled from their flanks, σ from the measured stripe width, candidate
+  ridges linked into one continuous path (`cslx.segmentation.ridges`); its `Centres` carry a
+  predicted standard deviation (`sigma`, px) and `saturated` flags. It is `cslx extract`'s
+  default: the evidence (results/robust_extraction.md) is in `cslx.segmentation.robust`.
 
 `centres_to_pixels` turns centres into OpenCV pixel coordinates (the centre-file contract of
 docs/contracts.md); `cslx.segmentation.metrics` scores them against rendered ground truth.
@@ -32,7 +37,7 @@ __all__ = [
     "monochrome_for",
 ]
 
-METHODS = ("cm", "la", "qa", "aa", "steger", "med")
+METHODS = ("cm", "la", "qa", "aa", "steger", "med", "linked")
 STRIPES = ("h", "v")
 #: Steger scale for the rendered stripes (Gaussian sheet profile of ≈ 2 px std at 230 mm).
 DEFAULT_SIGMA = 2.0
@@ -83,9 +88,9 @@ def extract(
     image: ArrayLike,
     method: str,
     *,
-    space: Any = "r-g",
+    space: Any = None,
     stripe: str = "h",
-    sigma: float = DEFAULT_SIGMA,
+    sigma: float | None = None,
     med_options: dict | None = None,
     **params,
 ) -> Centres:
@@ -94,10 +99,12 @@ def extract(
     Args:
         image: (H, W, 3) RGB frame, or (H, W) monochrome.
         method: one of `METHODS`.
-        space: colour space, see `monochrome_for` (default R−G, the paper's choice).
+        space: colour space, see `monochrome_for`; default (None) R−G, the paper's choice, and
+            "auto" (the clip-aware kurtosis search) for "linked".
         stripe: "h" — horizontal stripe, one centre per column (`pos` = row v, N = W);
             "v" — vertical stripe, one centre per row (`pos` = column u, N = H).
-        sigma: Steger's Gaussian scale, px ("steger" and "med" only).
+        sigma: Steger's Gaussian scale, px ("steger", "med": default `DEFAULT_SIGMA`;
+            "linked": default None, chosen from the measured stripe width).
         med_options: keyword arguments of `cslx.segmentation.med.med` ("med" only), e.g. L, init.
         **params: the method's own keywords (`steger_centres` thresholds for "steger"/"med",
             `cslx.segmentation.baselines.cm` / `la` / ... keywords for the baselines).
@@ -109,6 +116,14 @@ def extract(
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}: use one of {', '.join(METHODS)}")
     axis = _axis(stripe)
+    if method == "linked":
+        from .robust import linked_extract
+
+        return linked_extract(
+            image, space="auto" if space is None else space, stripe=stripe, sigma=sigma, **params
+        )
+    space = "r-g" if space is None else space
+    sigma = DEFAULT_SIGMA if sigma is None else sigma
     mono, _ = monochrome_for(image, space, stripe)
     if method in _BASELINES:
         return _BASELINES[method](np.asarray(mono), axis, **params)

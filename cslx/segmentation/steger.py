@@ -73,11 +73,17 @@ class Centres(NamedTuple):
         valid: (N,) True where a centre was found.
         strength: (N,) detector response of the chosen point (0 where not valid); for
             Steger −λ in intensity/px², for the baselines the peak height above background.
+        sigma: (N,) optional predicted standard deviation of `pos` (px) from the image noise
+            and the Hessian (`cslx.segmentation.ridges`); None where the method has none.
+        saturated: (N,) optional flag: the centre lies on a clipped (saturated) core and was
+            taken from the plateau's edges; None where the method does not check.
     """
 
     pos: Float[Array, " n"]
     valid: Bool[Array, " n"]
     strength: Float[Array, " n"]
+    sigma: Float[Array, " n"] | None = None
+    saturated: Bool[Array, " n"] | None = None
 
 
 def sigma_for_width(width: float) -> float:

@@ -9,6 +9,7 @@
 """
 
 from .boards import render_calibration as render_calibration
+from .render import HARD_NUISANCES as HARD_NUISANCES
 from .render import LASER_RGB as LASER_RGB
 from .render import NUISANCE_NAMES as NUISANCE_NAMES
 from .render import NUISANCES as NUISANCES
@@ -36,6 +37,7 @@ __all__ = [
     "stripe_truth",
     "Nuisance",
     "NUISANCES",
+    "HARD_NUISANCES",
     "NUISANCE_NAMES",
     "LASER_RGB",
     "make_world",

@@ -49,6 +49,7 @@ from .shade import (
 from .truth import true_weld_line
 
 __all__ = [
+    "HARD_NUISANCES",
     "NUISANCES",
     "Nuisance",
     "RobotPose",
@@ -65,7 +66,11 @@ __all__ = [
 ]
 
 #: Red laser with small green/blue leakage (default) and a 520 nm green laser.
-LASER_RGB = {"red": (1.0, 0.07, 0.04), "green": (0.12, 1.0, 0.2)}
+LASER_RGB = {
+    "red": (1.0, 0.07, 0.04),
+    "green": (0.12, 1.0, 0.2),
+    "blue": (0.04, 0.18, 1.0),  # 450 nm: the Bayer green filter leaks a little
+}
 
 NUISANCES: dict[str, Nuisance] = {
     "clean": Nuisance(),
@@ -79,6 +84,19 @@ NUISANCES: dict[str, Nuisance] = {
         ambient=90.0, sun=350.0, sun_tilt_deg=40.0, sheen=120.0, glint=150.0, shadow=1.0
     ),
 }
+#: Hard conditions of the robust-extraction benchmark (`experiments.robust_extraction`), kept
+#: apart from `NUISANCES` so that the presets' data sets and the "mixed" draw are unchanged:
+#: green and blue lasers in sunlight, a saturated core (clipped to white over 3–15 px), and a
+#: thin faint stripe over a printed black-and-white target.
+HARD_NUISANCES: dict[str, Nuisance] = {
+    "green": NUISANCES["sunny"]._replace(laser_rgb=LASER_RGB["green"]),
+    "blue": NUISANCES["sunny"]._replace(laser_rgb=LASER_RGB["blue"]),
+    "saturated": Nuisance(laser_power=2500.0, sheet_fwhm_mm=1.4),
+    "saturated_sunny": NUISANCES["sunny"]._replace(laser_power=2500.0, sheet_fwhm_mm=1.4),
+    "printed": Nuisance(
+        ambient=150.0, printed=1.0, sheet_fwhm_mm=0.5, laser_power=90.0, speckle=0.4
+    ),
+}
 #: "mixed" draws one of the presets above per frame.
 NUISANCE_NAMES = (*NUISANCES, "mixed")
 
@@ -89,6 +107,8 @@ def _nuisance(nuisance: str | Nuisance, rng: np.random.Generator | None = None) 
     if nuisance == "mixed":
         rng = rng or np.random.default_rng(0)
         return NUISANCES[list(NUISANCES)[int(rng.integers(len(NUISANCES)))]]
+    if nuisance in HARD_NUISANCES:
+        return HARD_NUISANCES[nuisance]
     if nuisance not in NUISANCES:
         raise ValueError(f"unknown nuisance {nuisance!r}; choose one of {NUISANCE_NAMES}")
     return NUISANCES[nuisance]
@@ -217,8 +237,8 @@ def _as_f32(tree):
 
 
 @eqx.filter_jit
-def _render_kernel(sensor, world, pose, nz, cond, key, ss):
-    bg, laser, _ = surface_radiance(sensor, world, pose, nz, cond, ss)
+def _render_kernel(sensor, world, pose, nz, cond, key, ss, printed=False):
+    bg, laser, _ = surface_radiance(sensor, world, pose, nz, cond, ss, printed)
     return quantise(expose(bg, laser, nz, key))
 
 
@@ -249,6 +269,7 @@ def render_image(
         _as_f32(Conditions(*[np.asarray(c) for c in cond])),
         key,
         int(supersample),
+        bool(nz.printed != 0),
     )
     return np.array(img)
 

@@ -59,6 +59,11 @@ class Nuisance(NamedTuple):
         read_noise: sensor read noise (σ, DN); electrons_per_dn sets the shot noise
             (variance = signal / electrons_per_dn, DN²).
         vignetting: weight of the cos⁴ fall-off towards the image corners.
+        printed: weight in [0, 1] of a printed black-and-white target (a chequer of
+            `printed_mm` squares, turned with the brushing angle) over the steel: a
+            high-contrast texture whose black squares also absorb the laser, so a thin
+            stripe's contrast flips along its length. 0 (default) leaves the image unchanged.
+        printed_mm: side of the printed squares (mm).
     """
 
     ambient: float = 110.0
@@ -79,6 +84,8 @@ class Nuisance(NamedTuple):
     read_noise: float = 1.2
     electrons_per_dn: float = 25.0
     vignetting: float = 1.0
+    printed: float = 0.0
+    printed_mm: float = 6.0
 
 
 class Conditions(NamedTuple):
@@ -157,6 +164,16 @@ def _albedo_texture(xy, world):
     return brushed, dirt
 
 
+def _printed(xy, world, square_mm):
+    """Reflectance of a printed chequer (0.06 black, 0.8 white) turned by the brush angle."""
+    c, s = jnp.cos(world.brush_angle), jnp.sin(world.brush_angle)
+    a = (xy[..., 0] * c + xy[..., 1] * s) * (jnp.pi / square_mm)
+    b = (-xy[..., 0] * s + xy[..., 1] * c) * (jnp.pi / square_mm)
+    # Sharp but not aliased edges: ≈ 0.05 mm transition.
+    edge = jax.nn.sigmoid(jnp.sin(a) * jnp.sin(b) * (square_mm / 0.05))
+    return 0.06 + 0.74 * edge
+
+
 def _gauss_blur_fft(img, sigma):
     """Gaussian blur (σ in pixels) of an (H, W, …) image by FFT (periodic edges, padded)."""
     H, W = img.shape[:2]
@@ -178,9 +195,13 @@ def surface_radiance(
     nz: Nuisance,
     cond: Conditions,
     ss: int,
+    printed: bool = False,
 ) -> tuple[Float[Array, "h w 3"], Float[Array, "h w"], Float[Array, "h w 2"]]:
     """Background RGB (DN), laser irradiance (DN before colour) and the planes' values
-    f_i = n_i·X_c + 1 at each pixel, by casting every (sub)pixel's ray onto the surface."""
+    f_i = n_i·X_c + 1 at each pixel, by casting every (sub)pixel's ray onto the surface.
+
+    `printed` (static) switches the printed target of `Nuisance.printed` on; off, the program
+    is the one without it (bit-identical images for every other condition)."""
     cam = sensor.camera
     dt = sensor.planes.dtype
     R_wc, C_w = camera_to_world(sensor, pose)
@@ -211,6 +232,10 @@ def surface_radiance(
     plate = jnp.asarray(PLATE_RGB, dt)
     bead = jnp.asarray(BEAD_RGB, dt) * (1 + 0.08 * jnp.cos(phase))[..., None]
     albedo = tex[..., None] * (plate + on_bead[..., None] * (bead - plate))
+    # Printed target: white (0.8) and black (0.06) squares.
+    if printed:
+        ink = _printed(xy, world, nz.printed_mm)
+        albedo = albedo * (1 - nz.printed) + nz.printed * ink[..., None]
 
     # Sun and shadow (the shadow edges live in the robot frame).
     R_wr, t_wr = robot_to_world(pose, dt)
@@ -254,7 +279,10 @@ def surface_radiance(
         theta = fan_angle(X_c, sensor, i)
         fan = jnp.exp(-2 * (theta / fan_e) ** 2) * (jnp.abs(theta) <= fan_half)
         laser = laser + jnp.exp(-2 * (dist / w0) ** 2) * fan
-    laser = laser * nz.laser_power * (r0 / r) * (inc / inc0) * shadowed * (tex * 0.5 + 0.5)
+    surface = tex * 0.5 + 0.5
+    if printed:
+        surface = surface * (1 - nz.printed) + nz.printed * ink / 0.8
+    laser = laser * nz.laser_power * (r0 / r) * (inc / inc0) * shadowed * surface
 
     vign = 1 - nz.vignetting * (1 - ray_c[..., 2] ** 4)
     bg = bg * vign[..., None]

@@ -1,0 +1,335 @@
+"""The stripe as a whole: candidate ridges per column linked by dynamic programming.
+
+`steger_centres` keeps, in every column, the strongest ridge point. Anything stronger than
+the laser in one column — a sunlit edge, a glint, the other stripe at the crossing, the edge
+of a printed square — then wins that column and becomes a gross error; a weak stretch of the
+laser is lost. The laser line differs from all of these by being *one continuous curve across
+the image*. This module finds that curve:
+
+1. Ridge points. Steger's Hessian analysis at scale σ (`cslx.segmentation.steger`, Steger 1998
+   eqs. (10)–(17)): strength −λ (λ the most negative Hessian eigenvalue), normal n and the
+   Taylor step t to the line centre. Bright ridges only (λ < 0), normals within
+   `max_angle_deg` of the search axis (the other stripe of a cross runs across it).
+2. Candidates. Per column (horizontal stripe; per row for the vertical one) the K strongest
+   local maxima of −λ along the column, with sub-pixel position v + t/n_v (Steger's step to
+   the crossing of the local line with the column, as `steger_centres`), strength in units of
+   the frame's ridge noise z = −λ / mean|λ|, and the width of the smoothed profile
+   w² = −r/r_nn (Steger 1998 §4: r''/r = −1/(s² + σ²) at the centre of a Gaussian profile of
+   standard deviation s; background removed with the column's median).
+3. Linking. A Viterbi pass (`jax.lax.scan` over the columns) chooses for every column one
+   candidate or "no stripe", minimising
+
+       Σ_j [ −min(log(z/z0), c_max) ]                 (reward: presence, capped)
+     + Σ β · max(|Δv| − a·n, 0)²  (≤ J)                (smoothness; a jump costs at most J)
+     + Σ γ · (log w − log w_prev)²                      (the width stays the laser's)
+     + g per missing column inside the path            (gaps are allowed, but cost)
+
+   with one path that starts and ends anywhere (states: K candidates, gap, before, after).
+   The reward is capped, so a distractor brighter than the laser does not pay for the jumps
+   onto and off it: the longest consistent curve wins.
+4. Refinement and confidence. The chosen candidates keep Steger's sub-pixel position. A
+   centre farther than `LinkParams.reject_px` from the line through its neighbours (±6
+   columns, itself excluded) is dropped: the other stripe's core at a crossing and split
+   clipped cores. Each centre gets a predicted standard deviation along the search axis,
+   σ_pos = max(σ_noise ‖∂g_σ/∂n‖₂ / |r_nn|, s_path): the first term propagates white pixel
+   noise through Steger's Taylor step t = −r_n / r_nn (per centre); the second is the path's
+   own robust scatter about its local line (MAD of second differences at lag 12, per frame),
+   which also carries the laser speckle and texture that white noise misses.
+
+Pure JAX, jit-compiled, vmap-able over frames (σ, K and the axis are static).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from .steger import Centres, _check_image, _filter_axis, _ridge, _taps
+
+__all__ = ["LinkParams", "Candidates", "candidates", "link", "linked_centres", "noise_std"]
+
+
+class LinkParams(NamedTuple):
+    """Weights of the path cost (see the module docstring); all dimensionless or in pixels.
+
+    Attributes:
+        z0: ridge strength (in units of the frame's mean |λ|) at which a candidate's reward
+            is zero; weaker ones cost, stronger ones pay (log z/z0).
+        z_min: candidates below this strength are not considered at all.
+        reward_cap: largest reward of one candidate (log units).
+        slope: free displacement per column (px) before the smoothness cost starts.
+        beta: smoothness weight per px² beyond `slope`.
+        jump: largest smoothness cost of one step (a jump to another curve).
+        gamma: weight of the change of log width between linked candidates.
+        gap: cost of one column without a centre inside the path.
+        min_length: a path with fewer centres is no stripe.
+        reject_px: a linked centre farther than this (px, along the search axis) from the
+            line through its neighbours (±6 columns) is dropped as an outlier.
+    """
+
+    z0: float = 5.0
+    z_min: float = 2.0
+    reward_cap: float = 1.0
+    slope: float = 1.0
+    beta: float = 0.5
+    jump: float = 6.0
+    gamma: float = 0.5
+    gap: float = 0.6
+    min_length: int = 12
+    reject_px: float = 1.0
+
+
+class Candidates(NamedTuple):
+    """K candidate ridge points per column (axis 0) or row (axis 1): (N, K) arrays."""
+
+    pos: jax.Array  # sub-pixel coordinate along the search axis
+    z: jax.Array  # strength −λ / mean|λ| (0 where there is no candidate)
+    width: jax.Array  # standard deviation of the unsmoothed profile (px), ≥ 0.3
+    slope_n: jax.Array  # |n_along|, the cosine between the normal and the search axis
+    sigma_px: jax.Array  # predicted std of pos (px)
+
+
+def noise_std(image: jax.Array) -> jax.Array:
+    """Robust std of the pixel noise: MAD of the 4-neighbour Laplacian / √20 (Gaussian noise)."""
+    lap = (
+        4 * image[1:-1, 1:-1]
+        - image[:-2, 1:-1]
+        - image[2:, 1:-1]
+        - image[1:-1, :-2]
+        - image[1:-1, 2:]
+    )
+    mad = jnp.median(jnp.abs(lap - jnp.median(lap)))
+    return lax.stop_gradient(1.4826 * mad / math.sqrt(20.0))
+
+
+def _candidates(image, sigma: float, k: int, max_angle_deg: float) -> Candidates:
+    """Candidates of a horizontal stripe (one set per column); `image` is (H, W)."""
+    ridge = _ridge(image, sigma, 0.6)
+    min_cos = math.cos(math.radians(max_angle_deg))
+    steep = jnp.abs(ridge.nv) >= min_cos
+    score = jnp.where(ridge.geometric & steep & (ridge.strength > 0), ridge.strength, 0.0)
+    # Non-maximum suppression along the column (ties go to the upper pixel).
+    up = jnp.pad(score[:-1], ((1, 0), (0, 0)))
+    down = jnp.pad(score[1:], ((0, 1), (0, 0)))
+    score = jnp.where((score > up) & (score >= down), score, 0.0)
+    top, idx = lax.top_k(score.T, k)  # (W, K)
+    col = jnp.arange(score.shape[1])[:, None]
+    safe_nv = jnp.where(steep, ridge.nv, 1.0)
+    offset = (ridge.t / safe_nv)[idx, col]
+    pos = idx.astype(image.dtype) + jnp.clip(offset, -1.0, 1.0)
+    z = top / jnp.maximum(ridge.scale, jnp.finfo(image.dtype).tiny)
+    # Width from the smoothed value and curvature at the candidate: s² + σ² = −r / r_nn.
+    smooth = _filter_axis(_filter_axis(image, sigma, (0,), 0)[0], sigma, (0,), 1)[0]
+    background = jnp.median(smooth, axis=0)
+    r = smooth[idx, col] - background[:, None]
+    lam = jnp.maximum(top, jnp.finfo(image.dtype).tiny)
+    s2 = jnp.clip(r / lam - sigma**2, 0.09, 2500.0)
+    width = jnp.where(top > 0, jnp.sqrt(s2), 0.3)
+    # Position noise: std of r_n under white noise over std of t = −r_n / r_nn, along the axis.
+    g0, g1 = _taps(sigma, 0), _taps(sigma, 1)
+    norm0 = math.sqrt(g0[0] ** 2 + 2 * np.sum(g0[1:] ** 2))
+    norm1 = math.sqrt(2 * np.sum(g1[1:] ** 2))
+    nabs = jnp.abs(ridge.nv)[idx, col]
+    sig = noise_std(image) * norm0 * norm1 / lam / jnp.maximum(nabs, min_cos)
+    return Candidates(pos, jnp.where(top > 0, z, 0.0), width, nabs, sig)
+
+
+def _link(c: Candidates, p: LinkParams) -> jax.Array:
+    """Viterbi over columns: (N,) index of the chosen candidate, −1 where none."""
+    n, k = c.pos.shape
+    dtype = c.pos.dtype
+    inf = jnp.asarray(jnp.inf, dtype)
+    ok = c.z >= p.z_min
+    cost_on = jnp.where(ok, -jnp.minimum(jnp.log(jnp.maximum(c.z, 1e-6) / p.z0), p.reward_cap), inf)
+    logw = jnp.where(ok, jnp.log(jnp.clip(c.width, 0.3, 50.0)), 0.0)
+    gap_i, pre_i, post_i = k, k + 1, k + 2
+
+    def trans(d, steps, dlogw):
+        smooth = p.beta * jnp.maximum(jnp.abs(d) - p.slope * steps, 0.0) ** 2
+        return jnp.minimum(smooth, p.jump) + p.gamma * dlogw**2
+
+    def step(carry, xs):
+        cost, mem_pos, mem_w, mem_len = carry
+        pos, con, lw = xs
+        # into candidate k from candidate k' (K×K), from the gap, from "before"
+        from_on = cost[:k, None] + trans(
+            pos[None, :] - mem_pos[:k, None], 1.0, lw[None, :] - mem_w[:k, None]
+        )
+        from_gap = cost[gap_i] + trans(
+            pos - mem_pos[gap_i], mem_len[gap_i] + 1.0, lw - mem_w[gap_i]
+        )
+        from_pre = jnp.broadcast_to(cost[pre_i], (k,))
+        options = jnp.concatenate([from_on, from_gap[None], from_pre[None]], 0)  # (K+2, K)
+        src_on = jnp.argmin(options, axis=0)
+        new_on = jnp.min(options, axis=0) + con
+        src_on = jnp.where(src_on == k, gap_i, jnp.where(src_on == k + 1, pre_i, src_on))
+        # into the gap from a candidate or the gap
+        gap_opts = cost[: k + 1] + p.gap
+        src_gap = jnp.argmin(gap_opts)
+        new_gap = gap_opts[src_gap]
+        # "after": from any candidate, the gap or itself, free
+        post_opts = jnp.concatenate([cost[: k + 1], cost[post_i : post_i + 1]])
+        src_post = jnp.argmin(post_opts)
+        src_post = jnp.where(src_post == k + 1, post_i, src_post)
+        new_cost = jnp.concatenate(
+            [new_on, new_gap[None], cost[pre_i : pre_i + 1], jnp.min(post_opts)[None]]
+        )
+        new_pos = jnp.concatenate([pos, mem_pos[src_gap][None], mem_pos[pre_i:]])
+        new_w = jnp.concatenate([lw, mem_w[src_gap][None], mem_w[pre_i:]])
+        new_len = jnp.concatenate(
+            [jnp.zeros(k, dtype), (mem_len[src_gap] + 1.0)[None], mem_len[pre_i:]]
+        )
+        back = jnp.concatenate([src_on, src_gap[None], jnp.asarray([pre_i]), src_post[None]])
+        return (new_cost, new_pos, new_w, new_len), back.astype(jnp.int32)
+
+    zeros = jnp.zeros(3, dtype)
+    init = (
+        jnp.concatenate([cost_on[0], jnp.asarray([inf, 0.0, inf], dtype)]),
+        jnp.concatenate([c.pos[0], zeros]),
+        jnp.concatenate([logw[0], zeros]),
+        jnp.zeros(k + 3, dtype),
+    )
+    (cost, _, _, _), back = lax.scan(step, init, (c.pos[1:], cost_on[1:], logw[1:]))
+    last = jnp.argmin(cost).astype(jnp.int32)
+
+    def trace(state, b):
+        prev = b[state]
+        return prev, state
+
+    first, states = lax.scan(trace, last, back, reverse=True)
+    states = jnp.concatenate([first[None], states])
+    return jnp.where(states < k, states, -1)
+
+
+@functools.partial(jax.jit, static_argnames=("sigma", "axis", "k", "max_angle_deg"))
+def _linked(image, params, *, sigma, axis, k, max_angle_deg):
+    img = image if axis == 0 else image.T
+    c = _candidates(img, sigma, k, max_angle_deg)
+    choice = _link(c, params)
+    valid = choice >= 0
+    pick = jnp.maximum(choice, 0)[:, None]
+
+    def take(a):
+        return jnp.take_along_axis(a, pick, 1)[:, 0]
+
+    count = jnp.sum(valid)
+    z = jnp.where(valid, take(c.z), 0.0)
+    median_z = _masked_median(z, valid)
+    stripe = (count >= params.min_length) & (median_z >= params.z0)
+    valid = valid & stripe
+    pos = take(c.pos)
+    # Outliers along the path (the other stripe's core at a crossing, a split clipped core):
+    # a centre farther than `reject_px` from the line fitted to its neighbours is dropped.
+    resid = _local_residual(pos, valid, PATH_HALF_WINDOW)
+    valid = valid & ~(jnp.abs(resid) > params.reject_px)
+    pos = jnp.where(valid, pos, jnp.nan)
+    width = jnp.where(valid, take(c.width), jnp.nan)
+    # Predicted std: the Hessian term of the white pixel noise, or the scatter of the path
+    # about its local line where larger (speckle and texture move the centre more than sensor
+    # noise; the scatter already contains the white-noise part).
+    scatter = _path_scatter(pos, valid, 2 * PATH_HALF_WINDOW)
+    sig = jnp.where(valid, jnp.maximum(take(c.sigma_px), scatter), jnp.nan)
+    return Centres(pos, valid, jnp.where(valid, z, 0.0), sig), width
+
+
+#: Half window (columns) of the local line that judges a centre against its neighbours.
+PATH_HALF_WINDOW = 6
+
+
+def _window_sum(x, h):
+    """Σ of x over j−h..j+h (zero padded), by a cumulative sum."""
+    cs = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(x)])
+    n = x.shape[0]
+    j = jnp.arange(n)
+    return cs[jnp.clip(j + h + 1, 0, n)] - cs[jnp.clip(j - h, 0, n)]
+
+
+def _local_residual(pos, valid, h):
+    """pos − (least-squares line through the valid neighbours j−h..j+h, j itself excluded)."""
+    w = valid.astype(pos.dtype)
+    y = jnp.where(valid, pos, 0.0)
+    x = jnp.arange(pos.shape[0], dtype=pos.dtype)
+    sw = _window_sum(w, h) - w
+    sx = _window_sum(w * x, h) - w * x
+    sy = _window_sum(y, h) - y
+    sxx = _window_sum(w * x * x, h) - w * x * x
+    sxy = _window_sum(y * x, h) - y * x
+    det = sw * sxx - sx * sx
+    ok = (sw >= 4) & (det > 1e-6)
+    safe = jnp.where(ok, det, 1.0)
+    b = (sw * sxy - sx * sy) / safe
+    a = (sy - b * sx) / jnp.where(ok, sw, 1.0)
+    return jnp.where(ok & valid, pos - (a + b * x), 0.0)
+
+
+def _path_scatter(pos, valid, lag):
+    """Robust std of the path about its local line: MAD of pos_j − (pos_{j−L} + pos_{j+L})/2."""
+    n = pos.shape[0]
+    j = jnp.arange(n)
+    lo, hi = jnp.clip(j - lag, 0, n - 1), jnp.clip(j + lag, 0, n - 1)
+    ok = valid & valid[lo] & valid[hi] & (j - lag >= 0) & (j + lag < n)
+    d = jnp.where(ok, pos - 0.5 * (pos[lo] + pos[hi]), 0.0)
+    mad = _masked_median(jnp.abs(d), ok)
+    # Var(d) = 1.5 Var(pos) for independent errors at lag L; MAD → std by 1.4826.
+    return lax.stop_gradient(1.4826 * mad / math.sqrt(1.5))
+
+
+def _masked_median(x, mask):
+    """Median of x over mask (jit-safe: sort with +inf padding)."""
+    n = jnp.sum(mask)
+    s = jnp.sort(jnp.where(mask, x, jnp.inf))
+    i = jnp.maximum(n - 1, 0) // 2
+    j = jnp.maximum(n, 1) // 2
+    return jnp.where(n > 0, 0.5 * (s[i] + s[jnp.where(n % 2 == 0, j, i)]), 0.0)
+
+
+def candidates(
+    image, *, sigma: float, axis: int = 0, k: int = 4, max_angle_deg: float = 60.0
+) -> Candidates:
+    """The K candidate ridge points of every column (axis 0) or row (axis 1)."""
+    image = _check_image(image)
+    img = image if axis == 0 else image.T
+    return jax.jit(_candidates, static_argnums=(1, 2, 3))(img, float(sigma), k, max_angle_deg)
+
+
+def link(c: Candidates, params: LinkParams = LinkParams()) -> jax.Array:
+    """The linked path through candidates: (N,) chosen candidate index, −1 where none."""
+    return jax.jit(_link)(c, params)
+
+
+def linked_centres(
+    image,
+    *,
+    sigma: float,
+    axis: int = 0,
+    k: int = 4,
+    max_angle_deg: float = 60.0,
+    params: LinkParams = LinkParams(),
+) -> tuple[Centres, jax.Array]:
+    """Stripe centres of one frame by candidate linking: (`Centres` with `sigma`, width (N,)).
+
+    Args:
+        image: (H, W) monochrome image, bright stripe.
+        sigma: Steger's scale in px (static).
+        axis: 0 horizontal stripe (one centre per column), 1 vertical (one per row).
+        k: candidates per column (static).
+        max_angle_deg: largest angle of the stripe to its image axis (static).
+        params: `LinkParams`.
+
+    Returns:
+        `Centres` (pos, valid, strength in noise units z, sigma = predicted std of pos in px)
+        and the estimated profile standard deviation (px) of each centre (NaN where none).
+    """
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 (horizontal stripe) or 1 (vertical), got {axis!r}")
+    image = _check_image(image)
+    params = LinkParams(*[jnp.asarray(v, image.dtype) for v in params])
+    return _linked(
+        image, params, sigma=float(sigma), axis=axis, k=int(k), max_angle_deg=float(max_angle_deg)
+    )
