@@ -76,6 +76,12 @@ class WeldConfig(eqx.Module):
     fit_scale_mm: circle-fit RMS at which its confidence factor is 0.5.
     junction_min_confidence: a vertical-stripe bead at least this confident is a junction.
     n_huber / n_tukey: IRLS iterations (static: they shape the compiled loop).
+    n_gauss_newton / n_robust: Gauss–Newton steps per circle fit, and Tukey reweightings of
+        the circle fit (its residual scale: 1.4826·MAD, at least twice the plate noise).
+    centre: the bead's position: "cap" (the cap model fitted to the bead and the plate
+        within `cap_margin_mm` of it, `_cap_fit`), "toes" (midpoint of the threshold
+        crossings) or "apex" (of the circle fitted to the run alone); see `stripe_feature`.
+    n_cap: Gauss–Newton steps of the cap model fit.
     """
 
     threshold_mm: float = 0.3
@@ -89,6 +95,10 @@ class WeldConfig(eqx.Module):
     n_huber: int = eqx.field(static=True, default=5)
     n_tukey: int = eqx.field(static=True, default=8)
     n_gauss_newton: int = eqx.field(static=True, default=4)
+    n_robust: int = eqx.field(static=True, default=3)
+    centre: str = eqx.field(static=True, default="cap")
+    cap_margin_mm: float = 4.0
+    n_cap: int = eqx.field(static=True, default=8)
 
 
 class WeldFeature(NamedTuple):
@@ -212,6 +222,43 @@ def _circle_fit(t, h, w, n_iter):
     return a + tm, b, R, rms
 
 
+def _cap_model(p, t):
+    """Height of a circular cap (centre a, half-chord c, height H) on the plate h = 0."""
+    a, c, H = p[0], jnp.abs(p[1]) + 1e-3, jnp.abs(p[2]) + 1e-3
+    R = (c * c + H * H) / (2.0 * H)
+    inside = jnp.square(t - a) < c * c
+    top = jnp.sqrt(jnp.maximum(R * R - jnp.square(t - a), 1e-9)) - (R - H)
+    return jnp.where(inside, top, 0.0)
+
+
+def _cap_fit(t, h, w, p0, sigma, n_iter):
+    """The cap (a, c, H) that best explains the heights h(t), plate points included.
+
+    Gauss–Newton on the vertical residuals with Tukey weights (scale 1.4826·MAD, at least
+    2σ): a point of the plate where the cap would stand counts against it, a stretch of the
+    profile that is missing (a glint) counts for nothing, and points that no cap explains
+    (a centre on the wrong ridge) lose their weight.
+    """
+
+    def res(p):
+        return h - _cap_model(p, t)
+
+    def body(_, carry):
+        p, wr = carry
+        r = jax.lax.stop_gradient(res(p))
+        scale = jnp.maximum(1.4826 * _masked_median(jnp.abs(r), w > 0), 2.0 * sigma)
+        u = r / (4.685 * scale)
+        wr = w * jnp.square(jnp.clip(1.0 - u * u, 0.0, 1.0))
+        J = -jax.jacfwd(_cap_model)(p, t)
+        step = _wls(J, -res(p), wr, 1e-6)
+        new = p + jnp.clip(step, -2.0, 2.0)
+        good = jnp.all(jnp.isfinite(new))
+        return jnp.where(good, new, p), wr
+
+    p, wr = jax.lax.fori_loop(0, n_iter, body, (p0, w))
+    return p, wr
+
+
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
@@ -260,11 +307,25 @@ def stripe_feature(
     run = above & (seg == best)
     n_run = jnp.sum(run.astype(dtype))
 
-    # 4. circular cap
+    # 4. circular cap, refitted with Tukey weights on its geometric residuals: the cap that
+    # best explains the run, whatever a glint or a clipped core left in it
     w_run = run.astype(dtype)
-    a, b, R, rms = _circle_fit(
-        jnp.where(run, t, 0.0), jnp.where(run, h, 0.0), w_run, config.n_gauss_newton
-    )
+    t_run, h_run = jnp.where(run, t, 0.0), jnp.where(run, h, 0.0)
+    a, b, R, rms = _circle_fit(t_run, h_run, w_run, config.n_gauss_newton)
+
+    def robust(_, carry):
+        a, b, R, rms, w = carry
+        d = jnp.sqrt(jnp.maximum(jnp.square(t_run - a) + jnp.square(h_run - b), 1e-12)) - R
+        d = jax.lax.stop_gradient(d)
+        scale = jnp.maximum(1.4826 * _masked_median(jnp.abs(d), run), 2.0 * sigma)
+        u = d / (4.685 * scale)
+        w = w_run * jnp.square(jnp.clip(1.0 - u * u, 0.0, 1.0))
+        ok = jnp.sum(w) >= 0.5 * config.min_points
+        fit = _circle_fit(t_run, h_run, jnp.where(ok, w, w_run), config.n_gauss_newton)
+        return (*fit, jnp.where(ok, w, w_run))
+
+    a, b, R, rms, w_in = jax.lax.fori_loop(0, config.n_robust, robust, (a, b, R, rms, w_run))
+    n_in = jnp.sum(jnp.where(w_in > 0.5, 1.0, 0.0))
     half2 = R * R - b * b
     height = b + R
     convex = b < jnp.sum(w_run * h) / jnp.maximum(n_run, 1.0)
@@ -272,8 +333,39 @@ def stripe_feature(
     extent = jnp.max(jnp.where(run, t, -1e9)) - jnp.min(jnp.where(run, t, 1e9))
     width = jnp.where(half2 > 0, 2.0 * jnp.sqrt(jnp.maximum(half2, 1e-12)), extent)
 
-    # Apex back to (s, z) and to 3-D: the third coordinate from a linear fit q(s, z) over
+    # Toes: where the run's ends cross the threshold, interpolated from the plate point
+    # outside them. Their midpoint is the bead's centre on any symmetric cap whatever the
+    # threshold, and it rests on the points nearest the plate, which the sheen and glints of
+    # the cap (sun, glare) distort least.
+    first = jnp.argmax(run)
+    last = n - 1 - jnp.argmax(run[::-1])
+    prev_below = jax.lax.cummax(jnp.where(below, idx, -1))[first]
+    next_below = jax.lax.cummin(jnp.where(below, idx, n), reverse=True)[last]
+
+    def cross(i_out, i_in):
+        i_out = jnp.clip(i_out, 0, n - 1)
+        t0, h0, t1, h1 = t[i_out], h[i_out], t[i_in], h[i_in]
+        f = jnp.clip((config.threshold_mm - h0) / jnp.where(h1 > h0, h1 - h0, 1.0), 0.0, 1.0)
+        return t0 + f * (t1 - t0)
+
+    toes_mid = 0.5 * (cross(prev_below, first) + cross(next_below, last))
+    # the cap model over the bead and the plate around it
+    half0 = jnp.clip(0.5 * width, 0.5 * config.min_width_mm, 0.5 * config.max_width_mm)
+    near = valid & (jnp.abs(t - a) < half0 + config.cap_margin_mm)
+    p_cap, _ = _cap_fit(
+        jnp.where(near, t, 0.0),
+        jnp.where(near, h, 0.0),
+        near.astype(dtype),
+        jnp.stack([a, half0, jnp.clip(height, 0.1, 10.0)]),
+        sigma,
+        config.n_cap,
+    )
+    ok_cap = jnp.all(jnp.isfinite(p_cap)) & (jnp.abs(p_cap[0] - a) < half0)
+    t_cap = jnp.where(ok_cap, p_cap[0], a)
+    t_c = {"toes": toes_mid, "apex": a, "cap": t_cap}[config.centre]
+    # Centre back to (s, z) and to 3-D: the third coordinate from a linear fit q(s, z) over
     # all valid points (exact for points on one laser plane).
+    a = t_c
     s_c = (a - c1 * height) / norm
     z_c = c0 + (c1 * a + height) / norm
     other = 1 - axis
@@ -299,7 +391,7 @@ def stripe_feature(
     )
     f_fit = 1.0 / (1.0 + jnp.square(rms / config.fit_scale_mm))
     f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
-    f_cover = jnp.clip(n_run / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_run / 15.0, 0, 1)
+    f_cover = jnp.clip(n_in / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_in / 15.0, 0, 1)
     f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
     confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid, 0.0)
     nan = jnp.asarray(jnp.nan, dtype)
