@@ -420,14 +420,17 @@ def weld_features(
         profile_h, valid_h: the horizontal stripe's points (W, 3) (robot frame, mm, column
             order) and mask; its bead is the followed weld, position = its y_r (the offset).
         profile_v, valid_v: the vertical stripe's (H, 3) points and mask; a bead here is a
-            crossing weld, position = its x_r (the junction distance).
+            crossing weld (`cslx.runtime.junction.crossing_feature`: found from its far
+            side, beside the followed weld or along its flank), position = its x_r.
         config: WeldConfig.
     Returns:
         (feature_h, feature_v, junction) with junction true when the vertical stripe crosses
         a bead with confidence ≥ config.junction_min_confidence.
     """
+    from .junction import crossing_feature
+
     fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
-    fv = stripe_feature(profile_v, valid_v, VERTICAL_AXIS, config)
+    fv = crossing_feature(profile_v, valid_v, config)
     junction = fv.found & (fv.confidence >= config.junction_min_confidence)
     return fh, fv, junction
 
