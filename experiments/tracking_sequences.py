@@ -77,13 +77,14 @@ def sequence_poses(seed: int, placement: str, n_frames: int, step_mm: float = 1.
     head = math.radians(kw.get("heading_deg", 3.5))
     lateral = 0.0 if placement == "beside" else 40.0 - 0.3 * w0
     # a differential-drive robot: its reference point moves along its heading, which
-    # wobbles by ±heading_deg over 120 mm of travel; the junction passes from x_r ≈ 235 mm to
-    # ≈ 165 mm (in view of the vertical stripe below ≈ 200 mm)
+    # wobbles by ±heading_deg over 120 mm of travel; the junction passes from x_r = start_mm
+    # (default 235 mm) towards the horizontal stripe (150 mm); `view_x_mm` says where the
+    # vertical stripe sees it
     ph = rng.uniform(0, 2 * math.pi)
     s = np.arange(n_frames) * step_mm
     theta = head * np.sin(2 * math.pi * s / 120.0 + ph)
     poses = np.zeros((n_frames, 3))
-    poses[0] = (-235.0, lateral + rng.uniform(-offset, offset), theta[0])
+    poses[0] = (-kw.get("start_mm", 235.0), lateral + rng.uniform(-offset, offset), theta[0])
     for i in range(1, n_frames):
         x, y, th = poses[i - 1]
         mid = 0.5 * (th + theta[i])
@@ -92,11 +93,19 @@ def sequence_poses(seed: int, placement: str, n_frames: int, step_mm: float = 1.
 
 
 def make_sequence(
-    seed: int, nuisance: str, placement: str, n_frames: int = 48, cache: pathlib.Path | None = None
+    seed: int,
+    nuisance: str,
+    placement: str,
+    n_frames: int = 48,
+    cache: pathlib.Path | None = None,
+    start_mm: float = 235.0,
 ) -> dict[str, np.ndarray]:
-    """Render (or load from `cache`) one sequence: frames, odometry and the truth per frame."""
+    """Render (or load from `cache`) one sequence: frames, odometry and the truth per frame.
+
+    start_mm: the junction's x_r at the first frame (the robot's distance to it + 150 mm).
+    """
     path = None
-    if cache is not None:
+    if cache is not None and start_mm == 235.0:
         path = cache / f"seq_{placement}_{nuisance}_{seed}_{n_frames}.npz"
         if path.exists():
             return dict(np.load(path))
@@ -106,7 +115,7 @@ def make_sequence(
     from cslx.sim.truth import true_weld_line
 
     sensor = default_sensor()
-    world, poses, sizes = sequence_poses(seed, placement, n_frames)
+    world, poses, sizes = sequence_poses(seed, placement, n_frames, start_mm=start_mm)
     frames, truth = [], []
     for i, p in enumerate(poses):
         pose = RobotPose(*p)
