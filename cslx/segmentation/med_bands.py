@@ -15,7 +15,7 @@ state (`cslx.runtime.pipeline`):
    the delay is exactly (L − 1)/2; free filters on short segments become one-sided and move
    centres by up to 0.18 px, see the notes of `cslx.segmentation.med`) and Steger on its
    output; centres outside the band are reported as not found; when they lie more than
-   `MAX_PEAK_OFFSET` px (median) from the first pass's brightest samples, the band result
+   `MAX_PEAK_OFFSET` px (median) from the band's smoothed maxima, the band result
    is not used (the failure mode of `initial_filters`) and the next step runs instead;
 3. otherwise (no clear stripe, two stripes far apart) the frame's segments all go through
    the paper's full-frame MED (flat start, ridge delay) and Steger.
@@ -75,7 +75,7 @@ class BandConfig(eqx.Module):
     snr: float = eqx.field(static=True, default=5.0)
 
 
-#: Largest median |band centre − brightest sample| (px) accepted from band MED.
+#: Largest median |band centre − smoothed maximum of the band| (px) accepted from band MED.
 MAX_PEAK_OFFSET = 1.5
 
 
@@ -121,7 +121,18 @@ def _locate(I, axis: int, half: int, cfg: BandConfig):
     lo = jnp.where(start == 0, -1, start + cfg.margin)
     hi = jnp.where(start == size - 2 * half, size, start + 2 * half - 1 - cfg.margin)
     inside = jnp.mean((peaks >= lo) & (peaks <= hi))
-    return start, inside >= cfg.fraction, peaks
+    return start, inside >= cfg.fraction
+
+
+def _smoothed_peak(band, axis: int):
+    """Brightest sample of each segment after a [1, 2, 3, 2, 1] smoothing along it."""
+    taps = (1.0, 2.0, 3.0, 2.0, 1.0)
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (2, 2)
+    x = jnp.pad(band, pad)
+    n = band.shape[axis]
+    s = sum(t * lax.slice_in_dim(x, k, k + n, axis=axis) for k, t in enumerate(taps))
+    return first_peak(s, axis).astype(band.dtype)
 
 
 def _steger(B, axis, cfg: BandConfig, snr_scale: float = 1.0) -> Centres:
@@ -151,7 +162,7 @@ def band_centres(I: Float[Array, "h w"], W0: Float[Array, " L"], axis: int, cfg:
     half = cfg.half_h if axis == 0 else cfg.half_w
     if not 0 < 2 * half < I.shape[axis]:
         raise ValueError(f"band of {2 * half} samples does not fit a frame of {I.shape}")
-    start, fits, peaks = _locate(I, axis, half, cfg)
+    start, fits = _locate(I, axis, half, cfg)
 
     def in_band():
         zero = jnp.zeros((), jnp.int32)
@@ -165,7 +176,8 @@ def band_centres(I: Float[Array, "h w"], W0: Float[Array, " L"], axis: int, cfg:
         scale = band_snr_scale(2 * half, I.shape[axis])
         c = _steger(jnp.where(ok, r.output, band), axis, cfg, scale)
         c = Centres(c.pos + start.astype(c.pos.dtype), c.valid, c.strength)
-        return c, jnp.where(ok, r.filter, W0), r.steps.astype(jnp.int32), jnp.ones((), bool)
+        rough = _smoothed_peak(band, axis) + start
+        return c, jnp.where(ok, r.filter, W0), r.steps.astype(jnp.int32), rough
 
     def full():
         r = med(I, axis=axis, tol=cfg.tol, max_steps=cfg.max_steps, ridge_sigma=cfg.sigma)
@@ -175,10 +187,10 @@ def band_centres(I: Float[Array, "h w"], W0: Float[Array, " L"], axis: int, cfg:
 
     def checked():
         # A filter with two lobes copies the stripe to either side (`initial_filters`):
-        # the centres then leave the first pass's brightest samples by ≈ the lobe spacing.
-        res = in_band()
-        c = res[0]
-        off = jnp.nanmedian(jnp.where(c.valid, jnp.abs(c.pos - peaks), jnp.nan))
+        # the centres then leave the input's smoothed maxima by ≈ the lobe spacing.
+        c, W, steps, rough = in_band()
+        off = jnp.nanmedian(jnp.where(c.valid, jnp.abs(c.pos - rough), jnp.nan))
+        res = (c, W, steps, jnp.ones((), bool))
         return lax.cond(off <= MAX_PEAK_OFFSET, lambda: res, full)
 
     return BandResult(*lax.cond(fits, checked, full))
