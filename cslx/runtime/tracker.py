@@ -367,6 +367,7 @@ class Tracker:
         import jax.numpy as jnp
 
         from . import pipeline as pl
+        from .compiled import compile_cached, tree_digest
 
         self._log = _logger(log)
         # float32 is the speed path (docs/metrics.md, performance notes).
@@ -395,7 +396,9 @@ class Tracker:
 
         t0 = time.perf_counter()
         spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
-        self._compiled = jax.jit(_step).lower(spec, self._state0).compile()
+        key = f"tracker|{self.config!r}|{roi}|{tree_digest(self.sensor)}"
+        out_like = ((0, 0, 0), self._state0)
+        self._compiled = compile_cached(_step, (spec, self._state0), out_like, key)
         self.compile_s = time.perf_counter() - t0
         cache = jax.config.jax_compilation_cache_dir
         self._log(
