@@ -1,7 +1,7 @@
 """Weld-bead features from one laser stripe's 3-D profile, and T-junctions from both stripes.
 
 Section 4.3 of the paper tracks the weld from the stripe profile but gives no algorithm; this
-module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
+module is cslx's own, in five steps per stripe (all fixed-size, jit/vmap-able):
 
 1. **Base plate** — the profile's points (robot frame, mm) are written as (s, z) with s the
    coordinate along the stripe (y_r for the horizontal stripe, x_r for the vertical one).
@@ -19,19 +19,22 @@ module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
    geometric distance). Width = the chord where the circle meets the plate (h = 0), so the
    toes below the threshold are extrapolated; height (reinforcement) = the circle's apex;
    centre = the apex as a 3-D robot-frame point.
+5. **Position** — the cap model (a circular cap standing on the plate: centre, half-chord,
+   height) fitted by Gauss–Newton with Tukey weights to the bead *and* the plate within
+   `cap_margin_mm` around it (`_cap_fit`): where a glint or a clipped core hides part of the
+   bead the missing points count for nothing and the plate where the cap would stand counts
+   against it, so the bead's centre stays where the visible flanks and toes put it (rendered
+   sunlight, issue 12: the circle fitted to the run alone moved with the visible half).
 
-Junctions (limitation). `weld_features` reports a junction when the vertical stripe crosses
-a bead bounded by plate on both sides, i.e. a crossing weld on bare plate. With the default
-rig the vertical stripe lies along the followed weld's crown when the robot is on track, so
-at a real T the vertical profile is a step (crown level behind the crossing weld, plate
-beyond it) with the crossing bead at the step: that run touches the profile's end and is NOT
-reported by this rule. Detecting the end of the followed bead along the vertical stripe
-(anchoring its plate to the horizontal stripe's plate) is the missing piece.
+Junctions. `weld_features` finds the crossing weld of a T on the vertical stripe with
+`cslx.runtime.junction.crossing_feature`, from the crossing bead's far side, so that it is
+found both where the vertical stripe runs on bare plate beside the followed weld (the default
+rig: 40 mm to its right) and where it runs along the followed bead's flank.
 
 Heading. One frame of the cross sensor does not observe the weld's heading robustly: the
-horizontal stripe crosses the followed weld at one point, and the vertical stripe runs along
-it (on the crown when the robot is centred, where the cross-section is flat and the lateral
-position is ambiguous). `weld_line_from_features` therefore fits the line through several
+horizontal stripe crosses the followed weld at one point, and the vertical stripe runs on
+bare plate beside it (the default rig) or along it (where the cross-section is flat on the
+crown and the lateral position ambiguous). `weld_line_from_features` therefore fits the line through several
 bead centres — the tracker's recent horizontal-stripe centres carried into the current
 robot frame by odometry — and reports offset and heading; with one point it reports the
 offset and a NaN heading. A Kalman filter over (offset, heading) in the tracker is the
