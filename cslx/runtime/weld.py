@@ -34,8 +34,8 @@ rig: 40 mm to its right) and where it runs along the followed bead's flank.
 Heading. One frame of the cross sensor does not observe the weld's heading robustly: the
 horizontal stripe crosses the followed weld at one point, and the vertical stripe runs on
 bare plate beside it (the default rig) or along it (where the cross-section is flat on the
-crown and the lateral position ambiguous). `weld_line_from_features` therefore fits the line through several
-bead centres — the tracker's recent horizontal-stripe centres carried into the current
+crown and the lateral position ambiguous). `weld_line_from_features` therefore fits the
+line through several bead centres — the tracker's recent horizontal-stripe centres carried into the current
 robot frame by odometry — and reports offset and heading; with one point it reports the
 offset and a NaN heading. A Kalman filter over (offset, heading) in the tracker is the
 intended consumer. Where the vertical stripe crosses the bead's flank, one frame does see
