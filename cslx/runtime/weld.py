@@ -35,14 +35,14 @@ Heading. One frame of the cross sensor does not observe the weld's heading robus
 horizontal stripe crosses the followed weld at one point, and the vertical stripe runs on
 bare plate beside it (the default rig) or along it (where the cross-section is flat on the
 crown and the lateral position ambiguous). `weld_line_from_features` therefore fits the
-line through several bead centres — the tracker's recent horizontal-stripe centres carried into the current
-robot frame by odometry — and reports offset and heading; with one point it reports the
-offset and a NaN heading. A Kalman filter over (offset, heading) in the tracker is the
-intended consumer. Where the vertical stripe crosses the bead's flank, one frame does see
-the heading: `heading_from_vertical` (host NumPy) matches the vertical stripe's heights
-against the cross-section the horizontal stripe measured, shifted along the weld by
-tan θ; it returns NaN where that is ambiguous (on the crown of a centred weld only |θ| is
-seen) or uninformative (bare plate).
+line through several bead centres — the tracker's recent horizontal-stripe centres carried
+into the current robot frame by odometry — and reports offset and heading; with one point
+it reports the offset and a NaN heading. A Kalman filter over (offset, heading) in the
+tracker is the intended consumer. Where the vertical stripe crosses the bead's flank, one
+frame does see the heading: `heading_from_vertical` (host NumPy) matches the vertical
+stripe's heights against the cross-section the horizontal stripe measured, shifted along
+the weld by tan θ; it returns NaN where that is ambiguous (on the crown of a centred weld
+only |θ| is seen) or uninformative (bare plate).
 """
 
 from __future__ import annotations
