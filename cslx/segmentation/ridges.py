@@ -159,6 +159,42 @@ def _candidates(image, sigma: float, k: int, max_angle_deg: float) -> Candidates
     return Candidates(pos, jnp.where(top > 0, z, 0.0), width, nabs, sig)
 
 
+def _candidates_column(image, sigma: float, k: int, sigma_along: float) -> Candidates:
+    """Candidates of a horizontal stripe from the column profiles of a smoothed image.
+
+    The image is smoothed along the stripe (axis 1, `sigma_along`) and differentiated across
+    it (axis 0, `sigma`); each column's profile maxima are located by the Taylor step
+    t = −r_v / r_vv along the column (Steger 1998 eq. (17) in 1-D), strength −r_vv. Along a
+    column a straight stripe of any tilt has a symmetric profile, so no normal is needed, and
+    the other stripe of the cross — constant along the column — adds nothing to r_v, r_vv.
+    """
+    (a,) = _filter_axis(image, sigma_along, (0,), 1)
+    smooth, rv, rvv = _filter_axis(a, sigma, (0, 1, 2), 0)
+    tiny = jnp.finfo(image.dtype).tiny
+    neg = rvv < 0
+    t = jnp.where(neg, -rv / jnp.where(neg, rvv, -1.0), 0.0)
+    strength = -rvv
+    score = jnp.where(neg & (jnp.abs(t) <= 0.6), strength, 0.0)
+    up = jnp.pad(score[:-1], ((1, 0), (0, 0)))
+    down = jnp.pad(score[1:], ((0, 1), (0, 0)))
+    score = jnp.where((score > up) & (score >= down), score, 0.0)
+    top, idx = lax.top_k(score.T, k)  # (W, K)
+    col = jnp.arange(score.shape[1])[:, None]
+    pos = idx.astype(image.dtype) + jnp.clip(t[idx, col], -1.0, 1.0)
+    scale = lax.stop_gradient(jnp.mean(jnp.abs(rvv)))
+    z = top / jnp.maximum(scale, tiny)
+    background = _median(smooth, axis=0)
+    r = smooth[idx, col] - background[:, None]
+    lam = jnp.maximum(top, tiny)
+    s2 = jnp.clip(r / lam - sigma**2, 0.09, 2500.0)
+    width = jnp.where(top > 0, jnp.sqrt(s2), 0.3)
+    g0, g1 = _taps(sigma_along, 0), _taps(sigma, 1)
+    norm0 = math.sqrt(g0[0] ** 2 + 2 * np.sum(g0[1:] ** 2))
+    norm1 = math.sqrt(2 * np.sum(g1[1:] ** 2))
+    sig = noise_std(image) * norm0 * norm1 / lam
+    return Candidates(pos, jnp.where(top > 0, z, 0.0), width, jnp.ones_like(pos), sig)
+
+
 def _link(c: Candidates, p: LinkParams) -> jax.Array:
     """Viterbi over columns: (N,) index of the chosen candidate, −1 where none."""
     n, k = c.pos.shape
@@ -226,10 +262,15 @@ def _link(c: Candidates, p: LinkParams) -> jax.Array:
     return jnp.where(states < k, states, -1)
 
 
-@functools.partial(jax.jit, static_argnames=("sigma", "axis", "k", "max_angle_deg"))
-def _linked(image, params, *, sigma, axis, k, max_angle_deg):
+@functools.partial(
+    jax.jit, static_argnames=("sigma", "axis", "k", "max_angle_deg", "sigma_along")
+)
+def _linked(image, params, *, sigma, axis, k, max_angle_deg, sigma_along=None):
     img = image if axis == 0 else image.T
-    c = _candidates(img, sigma, k, max_angle_deg)
+    if sigma_along is None:
+        c = _candidates(img, sigma, k, max_angle_deg)
+    else:
+        c = _candidates_column(img, sigma, k, sigma_along)
     choice = _link(c, params)
     valid = choice >= 0
     pick = jnp.maximum(choice, 0)[:, None]
@@ -261,30 +302,29 @@ def _linked(image, params, *, sigma, axis, k, max_angle_deg):
 PATH_HALF_WINDOW = 6
 
 
-def _window_sum(x, h):
-    """Σ of x over j−h..j+h (zero padded), by a cumulative sum."""
-    cs = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(x)])
-    n = x.shape[0]
-    j = jnp.arange(n)
-    return cs[jnp.clip(j + h + 1, 0, n)] - cs[jnp.clip(j - h, 0, n)]
+def _window_moment(x, h: int, power: int):
+    """Σ_{m=−h..h, m≠0} x[j+m] m^power (zero padded): sums in the window's own coordinates,
+    so float32 keeps them exact far from column 0 (global sums of x² cancel)."""
+    m = np.arange(-h, h + 1, dtype=float)
+    kernel = np.where(m == 0, 0.0, m**power)[::-1]  # convolution flips the kernel
+    return jnp.convolve(x, jnp.asarray(kernel, x.dtype), mode="same")
 
 
 def _local_residual(pos, valid, h):
     """pos − (least-squares line through the valid neighbours j−h..j+h, j itself excluded)."""
     w = valid.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
-    x = jnp.arange(pos.shape[0], dtype=pos.dtype)
-    sw = _window_sum(w, h) - w
-    sx = _window_sum(w * x, h) - w * x
-    sy = _window_sum(y, h) - y
-    sxx = _window_sum(w * x * x, h) - w * x * x
-    sxy = _window_sum(y * x, h) - y * x
+    sw = _window_moment(w, h, 0)
+    sx = _window_moment(w, h, 1)
+    sxx = _window_moment(w, h, 2)
+    sy = _window_moment(y, h, 0)
+    sxy = _window_moment(y, h, 1)
     det = sw * sxx - sx * sx
     ok = (sw >= 4) & (det > 1e-6)
     safe = jnp.where(ok, det, 1.0)
     b = (sw * sxy - sx * sy) / safe
-    a = (sy - b * sx) / jnp.where(ok, sw, 1.0)
-    return jnp.where(ok & valid, pos - (a + b * x), 0.0)
+    a = (sy - b * sx) / jnp.where(ok, sw, 1.0)  # the line's value at j itself (x = 0)
+    return jnp.where(ok & valid, pos - a, 0.0)
 
 
 def _path_scatter(pos, valid, lag):
@@ -330,6 +370,7 @@ def linked_centres(
     k: int = 4,
     max_angle_deg: float = 60.0,
     params: LinkParams = LinkParams(),
+    sigma_along: float | None = None,
 ) -> tuple[Centres, jax.Array]:
     """Stripe centres of one frame by candidate linking: (`Centres` with `sigma`, width (N,)).
 
@@ -350,5 +391,11 @@ def linked_centres(
     image = _check_image(image)
     params = LinkParams(*[jnp.asarray(v, image.dtype) for v in params])
     return _linked(
-        image, params, sigma=float(sigma), axis=axis, k=int(k), max_angle_deg=float(max_angle_deg)
+        image,
+        params,
+        sigma=float(sigma),
+        axis=axis,
+        k=int(k),
+        max_angle_deg=float(max_angle_deg),
+        sigma_along=None if sigma_along is None else float(sigma_along),
     )

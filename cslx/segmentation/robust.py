@@ -74,10 +74,12 @@ SEARCH_STRIDE = 4
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
 #: 2.5 / 3.5 / 4.5 px gave median errors 0.090 / 0.084 / 0.073 mm at the same detection and
 #: gross rates, so σ goes to twice the measured s, at least 3.5 px.
-SIGMA_MIN = 3.5
+SIGMA_MIN = float(__import__("os").environ.get("SEG2_SMIN", 2.0))
 #: σ of the first (width-measuring) pass, px: the floor, so that pass is final on most frames.
 SIGMA0 = SIGMA_MIN
-SIGMA_PER_WIDTH = 2.0
+SIGMA_PER_WIDTH = float(__import__("os").environ.get("SEG2_SPW", 1.5))
+#: Smoothing along the stripe (px) of the column-profile candidates.
+SIGMA_ALONG = float(__import__("os").environ.get("SEG2_ALONG", 6.0))
 SIGMA_MAX = 6.0
 
 
@@ -255,13 +257,16 @@ def linked_extract(
     else:
         mono, _ = monochrome_for(image, space, stripe)
         filled = jnp.zeros(mono.shape, bool)
+    sa = SIGMA_ALONG
     first = SIGMA0 if sigma is None else float(sigma)
-    c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params)
+    c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params, sigma_along=sa)
     if sigma is None:
         # The first pass at the floor σ is final unless the measured width asks for more.
         final = stripe_sigma(width)
         if final != first:
-            c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params)
+            c, _ = linked_centres(
+                mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa
+            )
     f = filled if axis == 0 else filled.T
     n_along = f.shape[0]
     near = jnp.clip(jnp.round(jnp.nan_to_num(c.pos)).astype(jnp.int32), 0, n_along - 1)
