@@ -213,7 +213,7 @@ def _prepare(image, clip_level, weights, *, axis: int, auto: bool):
     clipped = clipped_mask(image, clip_level)
     w = _unclipped_space(image, clipped, axis) if auto else weights.astype(image.dtype)
     mono, filled = fill_clipped(image @ w, clipped, axis=axis)
-    return mono, filled, w
+    return mono, filled, clipped & ~filled, w
 
 
 def linked_extract(
@@ -251,12 +251,13 @@ def linked_extract(
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)
-        mono, filled, _ = _prepare(
+        mono, filled, blind, _ = _prepare(
             image, clip_level, jnp.asarray(weights, image.dtype), axis=axis, auto=auto
         )
     else:
         mono, _ = monochrome_for(image, space, stripe)
         filled = jnp.zeros(mono.shape, bool)
+        blind = filled
     sa = SIGMA_ALONG
     first = SIGMA0 if sigma is None else float(sigma)
     c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params, sigma_along=sa)
@@ -264,11 +265,84 @@ def linked_extract(
         # The first pass at the floor σ is final unless the measured width asks for more.
         final = stripe_sigma(width)
         if final != first:
-            c, _ = linked_centres(
-                mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa
-            )
+            c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     f = filled if axis == 0 else filled.T
+    b = blind if axis == 0 else blind.T
+    pos, valid, sig, bridged = _bridge(c.pos, c.valid, c.sigma, b)
     n_along = f.shape[0]
-    near = jnp.clip(jnp.round(jnp.nan_to_num(c.pos)).astype(jnp.int32), 0, n_along - 1)
-    sat = f[near, jnp.arange(f.shape[1])] & c.valid
-    return c._replace(saturated=sat)
+    near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, n_along - 1)
+    sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
+    return c._replace(
+        pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
+    )
+
+
+#: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.
+MAX_BRIDGE = int(__import__("os").environ.get("SEG2_BRIDGE", 40))
+#: Columns next to hidden ones whose centres are replaced too (the smoothing along the
+#: stripe mixes the hidden pixels into them).
+BRIDGE_MARGIN = int(__import__("os").environ.get("SEG2_MARGIN", 6))
+#: Path points on either side that carry the bridge's line.
+BRIDGE_SUPPORT = 12
+
+
+@jax.jit
+def _bridge(pos, valid, sigma, blind):
+    """Centres across a stretch of the stripe hidden by unfillable clipped pixels.
+
+    Where the other stripe's clipped core crosses (a run longer than `MAX_RUN` along the
+    search axis), nothing of this stripe can be measured. Centres on or within
+    `BRIDGE_MARGIN` of such columns are replaced, over a gap of at most `MAX_BRIDGE`, by the
+    least-squares line through `BRIDGE_SUPPORT` path points on each side; they are flagged
+    (`saturated`) and their σ is the line's prediction std plus the path's scatter.
+
+    Args: pos, valid, sigma (N,) of the linked path; blind (H', N) clipped-and-unfilled mask
+    in search orientation. Returns (pos, valid, sigma, bridged).
+    """
+    n = pos.shape[0]
+    n_along = blind.shape[0]
+    j = jnp.arange(n)
+    prev = lax.cummax(jnp.where(valid, j, -1))
+    nxt = lax.cummin(jnp.where(valid, j, n), reverse=True)
+    pp, nn = jnp.clip(prev, 0, n - 1), jnp.clip(nxt, 0, n - 1)
+    span = jnp.maximum(nn - pp, 1).astype(pos.dtype)
+    guess = jnp.where(valid, pos, pos[pp] + (j - pp) * (pos[nn] - pos[pp]) / span)
+    guess = jnp.nan_to_num(guess)
+    rows = jnp.clip(
+        jnp.round(guess).astype(jnp.int32)[None, :] + jnp.arange(-3, 4)[:, None], 0, n_along - 1
+    )
+    hidden = jnp.any(blind[rows, j[None, :]], axis=0) & ((prev >= 0) | valid) & ((nxt < n) | valid)
+    m = BRIDGE_MARGIN
+    near = jnp.convolve(hidden.astype(pos.dtype), jnp.ones(2 * m + 1, pos.dtype), mode="same") > 0
+    keep = valid & ~near
+    prev = lax.cummax(jnp.where(keep, j, -1))
+    nxt = lax.cummin(jnp.where(keep, j, n), reverse=True)
+    gap = ~keep & (prev >= 0) & (nxt < n) & (nxt - prev - 1 <= MAX_BRIDGE)
+    # the gap must contain hidden columns
+    ch = jnp.concatenate([jnp.zeros(1, jnp.int32), jnp.cumsum(hidden.astype(jnp.int32))])
+    has = ch[jnp.clip(nxt, 0, n)] - ch[jnp.clip(prev + 1, 0, n)] > 0
+    gap = gap & has & near
+    h = BRIDGE_SUPPORT
+    off = jnp.arange(h)
+    idx = jnp.concatenate([prev[:, None] - off[None, :], nxt[:, None] + off[None, :]], 1)
+    ok = (idx >= 0) & (idx < n)
+    idx = jnp.clip(idx, 0, n - 1)
+    ok = ok & keep[idx]
+    w = ok.astype(pos.dtype)
+    x = (idx - j[:, None]).astype(pos.dtype)
+    y = jnp.where(ok, pos[idx], 0.0)
+    sw, sx, sxx = w.sum(1), (w * x).sum(1), (w * x * x).sum(1)
+    sy, sxy = (w * y).sum(1), (w * x * y).sum(1)
+    det = sw * sxx - sx * sx
+    good = gap & (sw >= 6) & (det > 1e-6)
+    safe = jnp.where(good, det, 1.0)
+    a = (sxx * sy - sx * sxy) / safe
+    b = (sw * sxy - sx * sy) / safe
+    resid = jnp.where(ok, y - a[:, None] - b[:, None] * x, 0.0)
+    s2 = (resid**2).sum(1) / jnp.maximum(sw - 2, 1.0)
+    var_a = s2 * sxx / safe
+    bridged = good
+    new_pos = jnp.where(bridged, a, jnp.where(keep, pos, jnp.nan))
+    new_valid = keep | bridged
+    new_sig = jnp.where(bridged, jnp.sqrt(var_a + s2), jnp.where(keep, sigma, jnp.nan))
+    return new_pos, new_valid, new_sig, bridged
