@@ -181,7 +181,11 @@ def _candidates_column(image, sigma: float, k: int, sigma_along: float) -> Candi
     top, idx = lax.top_k(score.T, k)  # (W, K)
     col = jnp.arange(score.shape[1])[:, None]
     pos = idx.astype(image.dtype) + jnp.clip(t[idx, col], -1.0, 1.0)
-    scale = lax.stop_gradient(jnp.mean(jnp.abs(rvv)))
+    # Noise level of −r_vv: the median |r_vv| (× 1.18, the mean-to-median ratio of |Gaussian|,
+    # so that z matches the Hessian candidates' mean |λ| on noise) — the median, not the
+    # mean, because after smoothing along the stripe a broad or clipped stripe can dominate
+    # the frame's mean.
+    scale = 1.1829 * _median(jnp.abs(rvv[::2, ::2]).reshape(-1))
     z = top / jnp.maximum(scale, tiny)
     background = _median(smooth, axis=0)
     r = smooth[idx, col] - background[:, None]
@@ -262,9 +266,7 @@ def _link(c: Candidates, p: LinkParams) -> jax.Array:
     return jnp.where(states < k, states, -1)
 
 
-@functools.partial(
-    jax.jit, static_argnames=("sigma", "axis", "k", "max_angle_deg", "sigma_along")
-)
+@functools.partial(jax.jit, static_argnames=("sigma", "axis", "k", "max_angle_deg", "sigma_along"))
 def _linked(image, params, *, sigma, axis, k, max_angle_deg, sigma_along=None):
     img = image if axis == 0 else image.T
     if sigma_along is None:
@@ -288,6 +290,7 @@ def _linked(image, params, *, sigma, axis, k, max_angle_deg, sigma_along=None):
     # a centre farther than `reject_px` from the line fitted to its neighbours is dropped.
     resid = _local_residual(pos, valid, PATH_HALF_WINDOW)
     valid = valid & ~(jnp.abs(resid) > params.reject_px)
+    valid = _drop_detours(pos, valid)
     pos = jnp.where(valid, pos, jnp.nan)
     width = jnp.where(valid, take(c.width), jnp.nan)
     # Predicted std: the Hessian term of the white pixel noise, or the scatter of the path
@@ -296,6 +299,43 @@ def _linked(image, params, *, sigma, axis, k, max_angle_deg, sigma_along=None):
     scatter = _path_scatter(pos, valid, 2 * PATH_HALF_WINDOW)
     sig = jnp.where(valid, jnp.maximum(take(c.sigma_px), scatter), jnp.nan)
     return Centres(pos, valid, jnp.where(valid, z, 0.0), sig), width
+
+
+#: A piece of the path shorter than this (centres) is a detour when it lies more than
+#: `DETOUR_PX` off the straight line between the path on its two sides.
+DETOUR_LENGTH = 16
+DETOUR_PX = 3.0
+
+
+def _drop_detours(pos, valid):
+    """Drop short pieces of the path that leave the line and come back (a bright speck of the
+    other stripe or a glint inside a stretch where the laser is absorbed or hidden): a piece
+    (valid centres, no gap) of fewer than `DETOUR_LENGTH` centres whose mean lies more than
+    `DETOUR_PX` from the straight line between the valid centres just before and after it."""
+    n = pos.shape[0]
+    j = jnp.arange(n)
+    start = valid & ~jnp.concatenate([jnp.zeros(1, bool), valid[:-1]])
+    seg = jnp.cumsum(start) - 1  # piece index of every valid centre
+    seg = jnp.where(valid, seg, n)
+    ones = valid.astype(pos.dtype)
+    length = jax.ops.segment_sum(ones, seg, n + 1)
+    total = jax.ops.segment_sum(jnp.where(valid, pos, 0.0), seg, n + 1)
+    first = jax.ops.segment_min(jnp.where(valid, j, n), seg, n + 1)
+    last = jax.ops.segment_max(jnp.where(valid, j, -1), seg, n + 1)
+    before = jnp.clip(first - 1, 0, n - 1)
+    after = jnp.clip(last + 1, 0, n - 1)
+    # Nearest valid centres outside the piece on each side.
+    prev_valid = lax.cummax(jnp.where(valid, j, -1))
+    next_valid = lax.cummin(jnp.where(valid, j, n), reverse=True)
+    p = prev_valid[before]
+    q = next_valid[after]
+    both = (first > 0) & (last < n - 1) & (p >= 0) & (p < first) & (q < n) & (q > last)
+    pp, qq = jnp.clip(p, 0, n - 1), jnp.clip(q, 0, n - 1)
+    mid = 0.5 * (first + last)
+    line = pos[pp] + (mid - pp) * (pos[qq] - pos[pp]) / jnp.maximum(qq - pp, 1)
+    mean = total / jnp.maximum(length, 1.0)
+    detour = both & (length < DETOUR_LENGTH) & (jnp.abs(mean - line) > DETOUR_PX)
+    return valid & ~detour[jnp.minimum(seg, n)]
 
 
 #: Half window (columns) of the local line that judges a centre against its neighbours.

@@ -74,12 +74,12 @@ SEARCH_STRIDE = 4
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
 #: 2.5 / 3.5 / 4.5 px gave median errors 0.090 / 0.084 / 0.073 mm at the same detection and
 #: gross rates, so σ goes to twice the measured s, at least 3.5 px.
-SIGMA_MIN = float(__import__("os").environ.get("SEG2_SMIN", 2.0))
+SIGMA_MIN = 2.5
 #: σ of the first (width-measuring) pass, px: the floor, so that pass is final on most frames.
 SIGMA0 = SIGMA_MIN
-SIGMA_PER_WIDTH = float(__import__("os").environ.get("SEG2_SPW", 1.5))
+SIGMA_PER_WIDTH = 1.0
 #: Smoothing along the stripe (px) of the column-profile candidates.
-SIGMA_ALONG = float(__import__("os").environ.get("SEG2_ALONG", 6.0))
+SIGMA_ALONG = 6.0
 SIGMA_MAX = 6.0
 
 
@@ -278,10 +278,10 @@ def linked_extract(
 
 
 #: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.
-MAX_BRIDGE = int(__import__("os").environ.get("SEG2_BRIDGE", 40))
+MAX_BRIDGE = 40
 #: Columns next to hidden ones whose centres are replaced too (the smoothing along the
 #: stripe mixes the hidden pixels into them).
-BRIDGE_MARGIN = int(__import__("os").environ.get("SEG2_MARGIN", 6))
+BRIDGE_MARGIN = 6
 #: Path points on either side that carry the bridge's line.
 BRIDGE_SUPPORT = 12
 
