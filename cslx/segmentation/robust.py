@@ -2,9 +2,15 @@
 
 The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
 
-1. Colour space. Fixed weights, or "auto": the kurtosis search of section 3.1
-   (`cslx.segmentation.colour.search_space`) with clipped pixels replaced by the frame's
-   median colour, so a white core does not decide the space (`search_space_unclipped`).
+1. Colour space. Fixed weights, or "auto": the kurtosis search of section 3.1 (the 74-space
+   grid of `cslx.segmentation.colour`, normalized form) with clipped pixels replaced by the
+   frame's median colour, so a white core does not decide the space
+   (`search_space_unclipped`). The grid is scored from the channels' moments (`_grid_scores`:
+   Σ(I − μ)² and Σ(I − μ)⁴ are a quadratic and a quartic form in the weights, so 6 + 15
+   moment sums per column replace 74 monochrome images; equal to `colour.search_space` to
+   rounding, tested) on every `SEARCH_STRIDE`-th column (row): on the 72 development searches
+   (seeds 7100–7117, both stripes) the choice equals the full search's 71 times, once
+   2R − G − B instead of R − G.
 2. Clipped cores. A pixel with any channel at the sensor's maximum holds a lower bound, not
    a value. Along the search axis, every run of clipped pixels at most `max_run` long gets the
    constant 1.5 × max(value of its two unclipped neighbours) in the monochrome image
@@ -12,29 +18,52 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    R = G = B = 255 maps to 0) becomes one symmetric bump whose centre is the plateau's middle,
    set by its unclipped flanks. White glints have grey flanks (≈ 0 in a laser-coloured space)
    and stay dark. Centres on a filled run are flagged `saturated`.
-3. σ from the width. A first pass at `SIGMA0` measures the stripe's profile standard
-   deviation s on the linked path (Steger 1998 §4, `cslx.segmentation.ridges`); the final
-   pass uses σ = `SIGMA_PER_WIDTH` × s rounded to 0.5 px within [`SIGMA_MIN`, `SIGMA_MAX`] —
-   Steger's condition σ ≥ w/√3 for a bar of half-width w is σ ≥ s for a Gaussian profile, and
-   a σ above it also averages speckle along the line.
-4. Linking (`cslx.segmentation.ridges.linked_centres`): K candidate ridges per column,
-   Viterbi path, Steger's sub-pixel step, predicted standard deviation per centre.
+3. Column profiles and σ (`cslx.segmentation.ridges`, `sigma_along`): the image is smoothed
+   by `SIGMA_ALONG` along the stripe and each column's profile is located by the 1-D Taylor
+   step, which measures through the crossing of the other stripe (constant along the
+   column). σ across the stripe is `SIGMA0`; when the measured profile std s (Steger 1998 §4)
+   asks for more — Steger's σ ≥ w/√3 for a bar of half-width w is σ ≥ s, e.g. a filled 15 px
+   plateau — a second pass uses σ = `SIGMA_PER_WIDTH` × s within [`SIGMA_MIN`, `SIGMA_MAX`].
+   On the development frames σ across changed little (1.5 / 2.5 px: medians 0.057 / 0.057 mm
+   horizontal); `SIGMA_ALONG` 6 / 10 / 15 px gave horizontal medians 0.059 / 0.051 / 0.048 mm, p95
+   0.22 / 0.24 / 0.34 mm, and vertical gross 0.24 / 1.3 / 3.7 %: longer smoothing rounds the
+   bead's corners, so 6 px.
+4. Linking (`cslx.segmentation.ridges.linked_centres`): K candidates per column, Viterbi
+   path, outliers and short detours dropped, predicted standard deviation per centre.
+5. Bridging (`_bridge`): where the other stripe's core is clipped across the whole column
+   (a run longer than `MAX_RUN`, left unfilled), nothing of this stripe can be measured; the
+   path there and `BRIDGE_MARGIN` px around it is replaced by the line through
+   `BRIDGE_SUPPORT` path points on each side (gaps up to `MAX_BRIDGE`), flagged `saturated`,
+   with the line's prediction std as `sigma`. Gaps with no clipped pixels (the laser's shadow
+   behind a bead, black print) are not bridged.
 
-Why it is the default of `cslx extract` (results/robust_extraction.md: 18 conditions — the four
-presets, green and blue lasers, saturated cores with and without sun, a thin stripe on a
-printed target — one frame each at held-out seeds 9100–9117, straight and T scenes): pooled
-over every condition the old default (MED + Steger, R−G, σ 2) finds 87 % / 88 % of the
-columns / rows (horizontal / vertical stripe) with 41.5 % / 42.2 % gross (> 1 mm) centres and
-medians 0.27 / 0.41 mm; "linked" finds 99.2 % / 99.2 % with 0.40 % / 0.63 % gross, medians
-0.066 / 0.080 mm, p95 0.30 / 0.37 mm. On the four presets alone the old method has 0.6–2.9 %
-gross, linked 0–0.23 %. MED in front of linked (the paper's order) made the median worse on
-every preset and broke saturated cores (21.8 % gross pooled), so MED is not part of it; the
-paper's MED + Steger stays as method "med" (Table 6). Missed goals of issue 11: gross ≤ 0.1 %
-(saturated cores: 0.9–2.5 %, mostly at the crossing of two clipped stripes), detection
-≥ 99.5 % (printed target 96.6–98.4 %, saturated in sun 95.7–97.7 %), median ≤ 0.03 mm
-(0.045–0.155 mm) and p95 ≤ 0.1 mm (0.17–0.6 mm). Cost: 0.8–1.0 s per frame and stripe on the
-shared 2-core CPU under load (two Hessian passes and the 74-space kurtosis search; the old
-default took 69 / 115 ms).
+Evidence (`experiments/robust_extraction.py`, 2 frames × 18 conditions — the four presets,
+green and blue lasers, saturated cores with and without sun, a thin stripe on a printed
+target — at held-out seeds 9100–9117; development used 7100–7117). Horizontal / vertical
+stripe, pooled: the linked detector of the first version (2-D Hessian candidates, σ 3.5)
+found 99.20 / 99.22 % of the ground-truth columns / rows with 0.36 / 0.59 % gross (> 1 mm)
+centres, median 0.066 / 0.082 mm, p95 0.277 / 0.385 mm; this version finds 100.00 / 99.81 %
+with 0.07 / 0.27 % gross, median 0.060 / 0.088 mm, p95 0.214 / 0.459 mm. Every condition but
+the printed target has 0.00 % gross (green vertical 0.05 %) and 100 % detection
+(saturated + sun vertical 99.74 %); the crossing of two clipped stripes, the worst case
+before (0.75–2.2 % gross), is now clean. The old default (MED + Steger, R−G, σ 2): 86.55 /
+89.47 %, 41.33 / 42.83 % gross, medians 0.294 / 0.371 mm. MED in front of linked still makes
+it worse (gross 18.8 % horizontal, from the saturated conditions), so MED is not part of it;
+the paper's MED + Steger stays as method "med" (Table 6). Flat wall, no bead in view
+(rendered, seeds 41–42): undistorted centres scatter 0.061–0.067 px RMS about a straight line
+for saturated horizontal stripes (0.08–0.10 px vertical; MED + Steger 1.5–3.6 px).
+
+Missed goals of issue 11: gross ≤ 0.1 % for the vertical stripe (0.27 %, all from the printed
+target: 2.38 % gross, median 0.36 mm — the print's reflectance steps under the thin stripe
+move its centre and 6 px smoothing along the stripe spreads that; the first version had
+0.69 % / 0.145 mm there); median ≤ 0.03 mm and p95 ≤ 0.1 mm: the error is laser speckle
+(contrast 0.5, ≈ 1 px grain): on a clean rendered scene the median is 0.08 px with speckle
+and 0.01 px without, and averaging more of it along the stripe costs the bead's corners
+(above). Cost per frame and stripe, warm: 60–68 ms CPU time (median over 12 calls; wall
+57 / 63 ms in the experiment, 91–106 ms in a separate run, with the shared 2-core machine at
+load 8–11), against ≈ 700 ms before (the 74-image kurtosis search alone took 2.1 s under load,
+two 2-D Hessian passes and whole-frame sorts for the medians): the ≤ 50 ms goal of this
+session is close but not met.
 """
 
 from __future__ import annotations

@@ -92,9 +92,10 @@ def test_stretch_hidden_by_a_clipped_crossing_is_bridged_and_flagged():
     assert np.abs(pos[white] - v_true[white]).max() < 0.3
     sig = np.asarray(c.sigma)
     assert np.isfinite(sig[white]).all() and (sig[white] > 0).all()
-    # Away from the crossing nothing is bridged and the centres are measured.
+    # Away from the crossing the (R-clipped, filled) core is measured.
     far = np.abs(np.arange(W) - 110) > 30
-    assert np.isfinite(pos[far]).mean() > 0.95 and not sat[far].any()
+    assert np.isfinite(pos[far]).mean() > 0.95
+    assert np.nanmedian(np.abs(pos[far] - v_true[far])) < 0.1
 
 
 def test_moment_grid_scores_equal_the_direct_search():
