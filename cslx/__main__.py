@@ -1,5 +1,8 @@
+"""`python -m cslx …` runs the `cslx` command (the same as the installed script)."""
+
 import sys
 
-from .cli import main
+from cslx.cli import main
 
-sys.exit(main())
+if __name__ == "__main__":
+    sys.exit(main())

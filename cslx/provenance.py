@@ -41,9 +41,18 @@ def cpu_name() -> str:
     return platform.processor() or "unknown CPU"
 
 
-def git_sha() -> str:
-    """The repository's HEAD commit (with `-dirty` when the tree has changes), or 'unknown'."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+#: The paths whose uncommitted changes make a result's code differ from its commit. Changes
+#: elsewhere (results/, README, notebooks) do not change what a script computes.
+CODE_PATHS = ("cslx", "experiments", "pyproject.toml")
+
+
+def git_sha(root: str | None = None) -> str:
+    """HEAD's short SHA, with `-dirty` when `CODE_PATHS` have uncommitted changes; or 'unknown'.
+
+    A result produced while only `results/` or the README differ from HEAD is still the
+    output of HEAD's code, so it names the clean commit.
+    """
+    root = root or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     try:
         sha = subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"],
@@ -53,7 +62,7 @@ def git_sha() -> str:
             check=True,
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS],
             cwd=root,
             capture_output=True,
             text=True,

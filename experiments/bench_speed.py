@@ -8,8 +8,12 @@ One function per measured figure (median wall time after warm-up, every result b
   (consecutive video frames, state carried; MED in the bands, and without it as before
   issue 13), a cold frame (bands from the first pass, MED converged there), the cold full
   frame (flat MED, L = 240 / 320, converged), the warm full frame and the tracker's `step`;
-- `bench_band_agreement`: band centres against full-frame MED centres and the ground truth,
-  for the ridge delay and the correlation-peak delay (the cause of the old band bias);
+- `bench_band_agreement`: band centres (first-pass bands, and tracking carried over the
+  video) against full-frame MED centres and the ground truth, for linear-phase band filters
+  (the default) and free ones with the ridge or the correlation-peak delay (issue 13);
+- `bench_archive`: `cslx.segmentation.med_bands.extract_frames`, the band MED that
+  `cslx extract --method med` runs on batches, per frame, and its centres against
+  full-frame MED and the truth;
 - `bench_med_stages`: MED per stripe cold and warm, its precompute and one fixed-point
   iteration, Steger per stripe, and the NumPy/SciPy MED peer (`experiments.bench_peers`);
 - `bench_tracking_pieces`: the pieces of the tracking path (colour as `x @ w` and as the
@@ -86,7 +90,7 @@ QUICK = dict(
     agreement_frames=3,
 )
 #: Frames of the short `cslx extract` run whose time (start-up, compile) is subtracted.
-CLI_BASE_FRAMES = 4
+CLI_BASE_FRAMES = 8  # = cslx.cli.extract.MED_BATCH: both runs use the same compiled batch
 
 
 # ------------------------------------------------------------------------------ helpers
@@ -259,28 +263,42 @@ def bench_pipeline(b: Bench) -> None:
         b.stage[key] = row
 
 
-def bench_band_agreement(b: Bench) -> None:
-    """Band centres vs full-frame MED centres (and the truth), ridge delay vs correlation peak.
+#: Band variants compared by `bench_band_agreement`: (key, label, PipelineConfig keywords).
+BAND_VARIANTS = (
+    ("symmetric", "linear-phase band filters (default)", {}),
+    ("ridge", "free band filters, ridge delay (before)", {"roi_symmetric": False}),
+    ("xcorr", "free band filters, correlation-peak delay", {"roi_symmetric": False,
+                                                           "med_delay": "xcorr"}),
+)  # fmt: skip
 
-    Per video frame: the full frame with MED (cold, ``roi=False``) gives the reference and
-    the tracking state; the same frame is then processed in tracking mode (MED in the bands,
-    from the full frame's state) and as a cold frame with first-pass bands. Reported: the
-    largest |median band − full| over frames and stripes, and the median |centre − truth|.
+
+def bench_band_agreement(b: Bench) -> None:
+    """Band centres vs full-frame MED centres (and the truth), per band-filter variant.
+
+    The reference is the full frame with MED (cold, ``roi=False``). Two band runs: a cold
+    frame with first-pass bands, and tracking carried over the whole video from frame 0
+    (band filters warm-started frame after frame, so they converge as they do on the
+    robot). Reported: the largest |median band − full| over the picked frames and both
+    stripes, and the median |centre − truth|.
     """
     from cslx.runtime import pipeline
 
     sensor = b.sensor
     k = min(b.cfg["agreement_frames"], b.F)
-    picks = np.linspace(0, b.F - 1, k).round().astype(int)
-    for delay in ("ridge", "xcorr"):
-        config = pipeline.PipelineConfig(med_delay=delay)
+    picks = set(np.linspace(0, b.F - 1, k).round().astype(int).tolist())
+    for key, _, kw in BAND_VARIANTS:
+        config = pipeline.PipelineConfig(**kw)
         state0 = pipeline.init_state(config, sensor.camera.image_size)
         worst = {"tracking": 0.0, "first pass": 0.0}
         err = {"full": [], "tracking": [], "first pass": []}
-        for i in picks:
-            full, st = pipeline.process_frame(sensor, config, b.frames[i], state0, roi=False)
+        st = state0
+        for i in range(b.F):
+            tracked, st = pipeline.process_frame(sensor, config, b.frames[i], st)
+            if i not in picks:
+                continue
+            full, _ = pipeline.process_frame(sensor, config, b.frames[i], state0, roi=False)
             runs = {
-                "tracking": pipeline.process_frame(sensor, config, b.frames[i], st)[0],
+                "tracking": tracked,
                 "first pass": pipeline.process_frame(sensor, config, b.frames[i], state0)[0],
             }
             for stripe, gt in (("h", b.truth["h_v"][i]), ("v", b.truth["v_u"][i])):
@@ -293,13 +311,69 @@ def bench_band_agreement(b: Bench) -> None:
                         d = np.median(np.asarray(c.pos)[both] - np.asarray(cf.pos)[both])
                         worst[name] = max(worst[name], abs(float(d)))
                     err[name].append(np.nanmedian(np.abs(np.asarray(c.pos) - gt)))
-        b.extra[f"agreement_{delay}"] = dict(
+        b.extra[f"agreement_{key}"] = dict(
             frames=len(picks),
             worst_tracking_px=worst["tracking"],
             worst_first_pass_px=worst["first pass"],
             **{f"median_err_{k.replace(' ', '_')}_px": float(np.median(v)) for k, v in err.items()},
         )
-        print(f"agreement ({delay}): {b.extra[f'agreement_{delay}']}", flush=True)
+        print(f"agreement ({key}): {b.extra[f'agreement_{key}']}", flush=True)
+
+
+def bench_archive(b: Bench) -> None:
+    """Band MED for archives (`cslx.segmentation.med_bands.extract_frames`), in process.
+
+    Batches of MED_BATCH frames, band filters carried from batch to batch as the command
+    line does; time per frame, steps, bands used, and the centres against full-frame MED
+    (the paper's method, ridge delay) and the truth.
+    """
+    import jax.numpy as jnp
+
+    from cslx.cli.extract import MED_BATCH
+    from cslx.segmentation import med, med_bands, steger
+
+    cfg = med_bands.BandConfig(weights=WEIGHTS, sigma=SIGMA)
+    F = b.F - b.F % MED_BATCH
+    batches = [b.frames[i : i + MED_BATCH] for i in range(0, F, MED_BATCH)]
+    holder = {"filters": med_bands.initial_filters(cfg), "steps": [], "band": []}
+
+    def run(i):
+        holder["filters"], res = med_bands.extract_frames(batches[i], holder["filters"], cfg)
+        _block(res)
+        holder["steps"].append([np.asarray(r.steps) for r in res])
+        holder["band"].append([np.asarray(r.used_band) for r in res])
+        return res
+
+    res = timeit(run, list(range(len(batches))), max(b.slow, 8), b.budget)
+    steps = np.concatenate([np.stack(s, 1) for s in holder["steps"]])
+    used = np.concatenate([np.stack(u, 1) for u in holder["band"]])
+    row = b.add(
+        "archive",
+        f"band MED + Steger, both stripes (med_bands.extract_frames, batch {MED_BATCH})",
+        dict(res, time_ms=res["time_ms"] / MED_BATCH, p90_ms=res["p90_ms"] / MED_BATCH),
+        med_steps=f"h {np.median(steps[:, 0]):.0f}, v {np.median(steps[:, 1]):.0f}",
+        roi_fraction=float(np.mean(used)),
+    )
+    b.stage["archive"] = row
+    # Accuracy on the first batch, from the flat start (what a new archive gets).
+    _, (rh, rv) = med_bands.extract_frames(batches[0], med_bands.initial_filters(cfg), cfg)
+    diffs, err_b, err_f = [], [], []
+    for k in range(len(batches[0])):
+        for axis, r, gt in ((0, rh, b.truth["h_v"][k]), (1, rv, b.truth["v_u"][k])):
+            full = med.med(b.monos[k], axis=axis)
+            cf = steger.steger_centres(full.output, sigma=SIGMA, axis=axis)
+            pos, valid = np.asarray(r.centres.pos[k]), np.asarray(r.centres.valid[k])
+            both = valid & np.asarray(cf.valid)
+            diffs.append(abs(float(np.median(pos[both] - np.asarray(cf.pos)[both]))))
+            err_b.append(np.nanmedian(np.abs(np.where(valid, pos, np.nan) - gt)))
+            err_f.append(np.nanmedian(np.abs(jnp.where(cf.valid, cf.pos, np.nan) - gt)))
+    b.extra["archive"] = dict(
+        frames=len(batches[0]),
+        worst_band_minus_full_px=max(diffs),
+        median_err_band_px=float(np.median(err_b)),
+        median_err_full_px=float(np.median(err_f)),
+    )
+    print(f"archive: {b.extra['archive']}", flush=True)
 
 
 def bench_med_stages(b: Bench) -> None:
@@ -458,11 +532,11 @@ def bench_tracking_pieces(b: Bench) -> None:
         "v": ([I[:, col0 : col0 + hw] for I in monos], 1, f"{frames.shape[1]}×{hw}"),
     }
     for stripe, (band, axis, size) in bands.items():
-        W = med.med(band[0], axis=axis, L=config.L_roi, delay="ridge", max_steps=60).filter
+        W = med.med(band[0], axis=axis, L=config.L_roi, symmetric=True, max_steps=60).filter
         b.stage[f"band_med_{stripe}"] = b.add(
             "stage",
-            f"tracking: MED on the {stripe} band ({size}, L={config.L_roi}, warm, "
-            f"≤ {config.roi_max_steps} steps, ridge delay)",
+            f"tracking: MED on the {stripe} band ({size}, L={config.L_roi}, linear phase, "
+            f"warm, ≤ {config.roi_max_steps} steps)",
             timeit(
                 lambda i, band=band, axis=axis, W=W: _block(
                     med.med(
@@ -471,7 +545,7 @@ def bench_tracking_pieces(b: Bench) -> None:
                         L=config.L_roi,
                         init=W,
                         max_steps=config.roi_max_steps,
-                        delay="ridge",
+                        symmetric=True,
                     )
                 ),
                 list(range(F)),
@@ -820,6 +894,7 @@ def main(
         ("baselines", bench_baselines),
         ("peers", lambda b: bench_filter_peers(b, skip_ridge)),
         ("batch", bench_batch),
+        ("archive", bench_archive),
         ("cli", bench_cli_extract),
         ("compile", bench_compile_cache),
         ("memory", bench_memory),
@@ -866,7 +941,7 @@ def _targets(b: Bench) -> list[dict]:
         return st.get(key, {}).get("time_ms")
 
     tr = st.get("tracking")
-    agr = ex.get("agreement_ridge")
+    agr = ex.get("agreement_symmetric")
     if tr is not None:
         unbiased = "" if agr is None else f"; band − full {agr['worst_tracking_px']:.3f} px"
         rows.append(
@@ -992,17 +1067,27 @@ def _markdown(b: Bench, prov, quick) -> str:
             f"alone: {listed} (sum {sum(pieces.values()):.2f} ms; the rest is dispatch, "
             "band bookkeeping and the lax.cond).\n"
         )
-    for delay in ("ridge", "xcorr"):
-        a = ex.get(f"agreement_{delay}")
+    for key, label, _ in BAND_VARIANTS:
+        a = ex.get(f"agreement_{key}")
         if a:
             notes.append(
-                f"- Delay `{delay}`: band − full-frame MED centres, worst |median| over "
+                f"- {label}: band − full-frame MED centres, worst |median| over "
                 f"{a['frames']} frames × 2 stripes: tracking {a['worst_tracking_px']:.3f} px, "
                 f"first-pass bands {a['worst_first_pass_px']:.3f} px; median |centre − truth| "
                 f"full frame {a['median_err_full_px']:.3f} px, tracking "
                 f"{a['median_err_tracking_px']:.3f} px, first pass "
                 f"{a['median_err_first_pass_px']:.3f} px.\n"
             )
+    if "archive" in ex:
+        a = ex["archive"]
+        notes.append(
+            f"- Archives (`med_bands.extract_frames`, what `cslx extract --method med` runs): "
+            f"{st['archive']['time_ms']:.2f} ms per frame, MED steps {st['archive']['med_steps']}"
+            f", bands on {100 * st['archive']['roi_fraction']:.0f} % of frames; from the flat "
+            f"start on {a['frames']} frames, band − full-frame MED worst |median| "
+            f"{a['worst_band_minus_full_px']:.3f} px, median |centre − truth| band "
+            f"{a['median_err_band_px']:.3f} px, full frame {a['median_err_full_px']:.3f} px.\n"
+        )
     if "colour" in st and "colour_matmul" in st:
         notes.append(
             f"- Colour space: `x @ w` {st['colour_matmul']['time_ms']:.3f} ms → channel-weighted "

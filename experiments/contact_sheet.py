@@ -4,18 +4,17 @@ Each scene is shown as rendered and again with its exact ground truth overlaid (
 stripe centres in cyan, vertical in yellow), plus a row of laser variants (over-exposed red
 core clipped to white, a 520 nm green laser). Compare with the paper's Figures 6, 7 and 18.
 
-Writes `results/contact_sheet.png`.
+Writes `contact_sheet.png` in --out (default `results/`).
 """
 
 from __future__ import annotations
 
 import os
-import pathlib
 import time
 
 import numpy as np
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+from experiments import common as C
 
 
 def overlay(image: np.ndarray, gt: dict) -> np.ndarray:
@@ -42,7 +41,7 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
     return img
 
 
-def main(seed: int = 3, scale: float = 0.5, out: str | None = None) -> str:
+def main(seed: int = 3, scale: float = 0.5, out: str = str(C.RESULTS)) -> str:
     import cv2
 
     from cslx import sim as synth
@@ -71,12 +70,13 @@ def main(seed: int = 3, scale: float = 0.5, out: str | None = None) -> str:
         row = np.concatenate(tiles, axis=1)
         rows.append(cv2.resize(row, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
     sheet = np.concatenate(rows, axis=0)
-    out = out or str(ROOT / "results" / "contact_sheet.png")
-    os.makedirs(os.path.dirname(out), exist_ok=True)
+    os.makedirs(out, exist_ok=True)
+    out = os.path.join(out, "contact_sheet.png")
     cv2.imwrite(out, sheet[..., ::-1])
     print(f"wrote {out} ({len(variants) * 2} frames in {time.perf_counter() - t0:.1f} s)")
     return out
 
 
 if __name__ == "__main__":
-    main()
+    args = C.parser(__doc__, 1, 3).parse_args()
+    main(seed=args.seed, out=args.out)

@@ -51,9 +51,22 @@ Choices where the paper is vague:
   is the delay of a symmetric (linear-phase) filter only; MED's filter is free, and on short
   segments (the tracking bands) it becomes one-sided and edge-enhancing, whose ridge a
   detector of scale σ sees 1–2 px from the correlation peak (issue 13; on full 640×480
-  frames 0.05–0.15 px). ``delay="ridge"`` measures the delay where it matters: the median
-  displacement of the stripe's ridge at scale σ from input to output segments
-  (`med_fft.ridge_delay`); the pipeline uses it.
+  frames 0.05–0.15 px). ``delay="ridge"`` (the default since issue 13) measures the delay
+  where it matters: the median displacement of the stripe's ridge at scale σ from input to
+  output segments (`med_fft.ridge_delay`). Evidence for the default (results/bench_speed.md,
+  held-out video frames): median |centre − truth| of full-frame MED + Steger 0.108 px with
+  "ridge" against 0.144 px with "xcorr"; in 64–128-sample bands "xcorr" is 1–2 px off.
+- Linear-phase MED (``symmetric=True``, issue 13). On short segments (the 64-row and
+  128-column bands of the pipeline) the free filter converges to a one-sided,
+  edge-enhancing filter: its output ridge moves with each segment's own stripe profile, so
+  no single delay undoes it, and band centres differed from full-frame MED by up to 0.18 px
+  (median over a frame). Restricting the filter to W_k = W_{L−1−k} (the stationarity
+  condition projected on those filters, `med_fft.update`) removes the cause: a symmetric
+  filter delays every frequency by exactly (L − 1)/2, which is undone with no estimate
+  (``delay="centre"``), and it moves the ridge of a symmetric stripe profile not at all.
+  On dev frames (rendered sunny video, seeds 3–4) the band centres then agree with
+  full-frame MED within 0.04 px and converge in 12–21 steps from the flat start (3–6 from
+  the previous frame's filter, to the same fixed point: centres within 0.001 px median).
 - Start (Table 2, step 1): ``init="flat"`` is W = 1/√L; ``"impulse"`` a unit impulse at
   L//2 (the usual MED start); an (L,) array warm-starts from the previous frame's filter.
   Table 2, step 2 cites "Equation (11)" for the output: it means eq. (18).
@@ -177,9 +190,14 @@ def med_prepare(
     return _f.prepare(X, L)
 
 
-def med_update(W: Float[Array, " L"], problem: _f.Problem, loading: float = 0.0):
-    """One step of eqs. (22)–(24): returns (new unit filter, Σ_j k_j at W, excess kurtosis at W)."""
-    W_new, st = _f.update(W, problem, loading)
+def med_update(
+    W: Float[Array, " L"], problem: _f.Problem, loading: float = 0.0, symmetric: bool = False
+):
+    """One step of eqs. (22)–(24): returns (new unit filter, Σ_j k_j at W, excess kurtosis at W).
+
+    ``symmetric``: the step restricted to linear-phase filters (`med_fft.update`).
+    """
+    W_new, st = _f.update(W, problem, loading, symmetric)
     return W_new, st.ratio_sum, st.excess
 
 
@@ -193,8 +211,23 @@ def _kurtosis_change(scaled_error):
     return jnp.abs(scaled_error[1]).astype(jnp.result_type(float))
 
 
+DELAYS = ("ridge", "xcorr", "centre")
+
+
+def _check_delay(delay, symmetric: bool) -> str:
+    if delay is None:
+        return "centre" if symmetric else "ridge"
+    if delay not in DELAYS:
+        raise ValueError(f"delay must be one of {', '.join(DELAYS)}, got {delay!r}")
+    if delay == "centre" and not symmetric:
+        raise ValueError('delay="centre" is the delay of a symmetric filter: use symmetric=True')
+    return delay
+
+
 def _delay(W, st, pb, delay, ridge_sigma):
-    """(delay, sign) of the filter: correlation peak, optionally refined on the ridge."""
+    """(delay, sign) of the filter: its centre (symmetric), correlation peak, or ridge."""
+    if delay == "centre":
+        return jnp.asarray((pb.L - 1) / 2, W.dtype), _f.centre_sign(W, st.w, pb)
     d, sign = _f.peak_delay(W, st.w, pb)
     if delay == "ridge":
         d = _f.ridge_delay(W, st, sign, d, pb, ridge_sigma)
@@ -204,7 +237,7 @@ def _delay(W, st, pb, delay, ridge_sigma):
 
 
 @eqx.filter_jit
-def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind="xcorr", ridge_sigma=2.0):
+def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma, symmetric=False):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
 
     def step(y, args):
@@ -212,7 +245,7 @@ def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind="xcorr", rid
         # component is the change of kurtosis between iterations (Table 2, step 5).
         W, _ = y
         pb, loading = args
-        W_new, st = _f.update(W, pb, loading)
+        W_new, st = _f.update(W, pb, loading, symmetric)
         return W_new, st.ratio_sum
 
     solver = optx.FixedPointIteration(rtol=tol, atol=tol * 1e-6, norm=_kurtosis_change)
@@ -238,8 +271,9 @@ def med(
     max_steps: int = 30,
     taper: int = DEFAULT_TAPER,
     loading: float | None = None,
-    delay: Literal["xcorr", "ridge"] = "xcorr",
+    delay: Literal["ridge", "xcorr", "centre"] | None = None,
     ridge_sigma: float = 2.0,
+    symmetric: bool = False,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -255,12 +289,15 @@ def med(
         max_steps: iteration cap; ``converged`` says whether ``tol`` was met.
         taper: raised-cosine ramp length at the segment ends (border-spike guard).
         loading: diagonal loading of R relative to R_00 (default 1e-5 float32, 1e-9 float64).
-        delay: how the filter's delay is measured before it is undone: ``"xcorr"`` the peak
-            of the output/input cross-correlation (eqs. (25)–(26), correction 6; exact for a
-            symmetric filter); ``"ridge"`` the median displacement of the stripe's ridge
-            seen at scale ``ridge_sigma`` from input to output (`med_fft.ridge_delay`):
-            unbiased for the one-sided filters MED finds on short segments (bands).
+        delay: how the filter's delay is measured before it is undone: ``"ridge"`` (default)
+            the median displacement of the stripe's ridge seen at scale ``ridge_sigma`` from
+            input to output (`med_fft.ridge_delay`); ``"xcorr"`` the peak of the
+            output/input cross-correlation (eqs. (25)–(26), correction 6; exact for a
+            symmetric filter only); ``"centre"`` (the default with ``symmetric``) exactly
+            (L − 1)/2, the delay of a linear-phase filter.
         ridge_sigma: detector scale of the ``"ridge"`` delay (Steger's σ downstream).
+        symmetric: restrict W to linear-phase filters W_k = W_{L−1−k} (module notes; the
+            pipeline's bands).
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -270,15 +307,13 @@ def med(
     L = _length(I, axis, L)
     W0 = initial_filter(init, L, I.dtype)
     loading = _default_loading(I.dtype) if loading is None else float(loading)
-    if delay not in ("xcorr", "ridge"):
-        raise ValueError(f"delay must be 'xcorr' or 'ridge', got {delay!r}")
-    return _med(
-        I, W0, axis, L, int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma)
-    )
+    delay = _check_delay(delay, symmetric)
+    args = (int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma))
+    return _med(I, W0, axis, L, *args, bool(symmetric))
 
 
 @eqx.filter_jit
-def _apply(I, W, axis, taper, delay_kind="xcorr", ridge_sigma=2.0):
+def _apply(I, W, axis, taper, delay_kind, ridge_sigma):
     pb = med_prepare(I, axis=axis, L=W.shape[0], taper=taper)
     st = _f.stats(W, pb)
     delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
@@ -292,7 +327,7 @@ def med_apply(
     *,
     axis: int = 0,
     taper: int = DEFAULT_TAPER,
-    delay: Literal["xcorr", "ridge"] = "xcorr",
+    delay: Literal["ridge", "xcorr", "centre"] = "ridge",
     ridge_sigma: float = 2.0,
 ) -> tuple[Float[Array, "h w"], Float[Array, ""], Float[Array, ""]]:
     """Filter a frame with a known MED filter (no iteration): (output, delay, kurtosis).
@@ -303,8 +338,8 @@ def med_apply(
     I = _check_image(I)
     W = jnp.asarray(W, I.dtype)
     _length(I, axis, W.shape[0])
-    if delay not in ("xcorr", "ridge"):
-        raise ValueError(f"delay must be 'xcorr' or 'ridge', got {delay!r}")
+    if delay not in DELAYS:
+        raise ValueError(f"delay must be one of {', '.join(DELAYS)}, got {delay!r}")
     return _apply(I, W, axis, int(taper), delay, float(ridge_sigma))
 
 

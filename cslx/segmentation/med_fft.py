@@ -150,7 +150,17 @@ def weighted_autocorrelation(w: Float[Array, " s2"], pb: Problem) -> Float[Array
     return jnp.fft.irfft(P, n=pb.n)
 
 
-def update(W: Float[Array, " L"], pb: Problem, loading: float) -> tuple[Array, Stats]:
+def symmetric_basis(L: int) -> np.ndarray:
+    """(L, ⌈L/2⌉) 0/1 matrix P with W = P h: the linear-phase filters W_k = W_{L−1−k}."""
+    P = np.zeros((L, (L + 1) // 2))
+    for k in range(L):
+        P[k, min(k, L - 1 - k)] = 1.0
+    return P
+
+
+def update(
+    W: Float[Array, " L"], pb: Problem, loading: float, symmetric: bool = False
+) -> tuple[Array, Stats]:
     """One fixed-point step W ← R⁻¹b / ‖R⁻¹b‖ (eqs. (22)–(24), correction 5).
 
     R_kl = Σ_j (k_j/U_j) Σ_i X_{i−l,j} X_{i−k,j}  (Toeplitz: weighted autocorrelation)
@@ -158,6 +168,10 @@ def update(W: Float[Array, " L"], pb: Problem, loading: float) -> tuple[Array, S
     Both are sums over segments of correlations, accumulated in the frequency domain and
     brought back with one short inverse FFT each. ``loading`` adds loading·R_00 to the
     diagonal before the Cholesky factorisation.
+
+    ``symmetric``: the same stationarity condition restricted to linear-phase filters
+    W = P h (`symmetric_basis`): the gradient of eq. (19) projected on them vanishes when
+    Pᵀ R P h ∝ Pᵀ b, so h ← (PᵀRP)⁻¹ Pᵀb and W = P h, normalised.
     """
     st = stats(W, pb)
     L, n = pb.L, pb.n
@@ -169,8 +183,27 @@ def update(W: Float[Array, " L"], pb: Problem, loading: float) -> tuple[Array, S
     r = weighted_autocorrelation(st.w, pb)[:L]
     idx = jnp.abs(jnp.arange(L)[:, None] - jnp.arange(L)[None, :])
     R = r[idx] + (loading * r[0]) * jnp.eye(L, dtype=r.dtype)
-    x = jsl.cho_solve(jsl.cho_factor(R, lower=True), bvec)
+    if symmetric:
+        P = jnp.asarray(symmetric_basis(L), r.dtype)
+        h = jsl.cho_solve(jsl.cho_factor(P.T @ R @ P, lower=True), P.T @ bvec)
+        x = P @ h
+    else:
+        x = jsl.cho_solve(jsl.cho_factor(R, lower=True), bvec)
     return x / jnp.linalg.norm(x), st
+
+
+def centre_sign(W: Float[Array, " L"], w: Float[Array, " s2"], pb: Problem):
+    """Sign of a linear-phase filter: that of the output/input correlation at its centre.
+
+    A symmetric filter delays every frequency by (L − 1)/2 exactly; the sign is chosen so
+    that c((L−1)/2) = Σ_j w_j Σ_i B_{i+(L−1)/2, j} X_ij > 0 (the stripe stays bright).
+    """
+    n, L = pb.n, pb.L
+    p = pb.Pa.shape[0]
+    P = w[:p] @ pb.Pa + w[p:] @ pb.Pb
+    c = jnp.fft.irfft(jnp.fft.rfft(W, n=n) * P, n=n)
+    mid = c[(L - 1) // 2] + c[L // 2]
+    return jnp.where(mid < 0, -1.0, 1.0).astype(W.dtype)
 
 
 def peak_delay(W: Float[Array, " L"], w: Float[Array, " s2"], pb: Problem):

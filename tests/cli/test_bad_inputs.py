@@ -252,3 +252,16 @@ def test_calibration_json_written_atomically_keeps_the_old_file(tmp_path):
     assert path.read_bytes() == before
     assert json.loads(before)["image_size"] == list(load_sensor(path).camera.image_size)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sensor.json"]
+
+
+def test_python_dash_m_cslx_runs_the_command():
+    """`python -m cslx` is the installed `cslx` script (same parser, same exit codes)."""
+    import subprocess
+    import sys
+
+    ok = subprocess.run([sys.executable, "-m", "cslx", "--help"], capture_output=True, text=True)
+    assert ok.returncode == 0 and "usage: cslx" in ok.stdout
+    bad = subprocess.run(
+        [sys.executable, "-m", "cslx", "demo", "--poses", "1"], capture_output=True, text=True
+    )
+    assert bad.returncode == 2 and "--poses 1" in bad.stderr

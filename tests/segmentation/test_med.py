@@ -56,8 +56,8 @@ def numpy_taper_centre(seg, taper):
     return win * (seg - mu)
 
 
-def numpy_med_step(I, W, taper, axis=0):
-    """One update of eqs. (22)–(24) (correction 5) with explicit loops over k, l, j, i."""
+def numpy_med_system(I, W, taper, axis=0):
+    """R, b and Σ_j k_j of eqs. (22)–(24) (correction 5) with explicit loops over k, l, j, i."""
     segs = I.T if axis == 0 else I
     X = numpy_taper_centre(segs, taper)  # (N segments, M samples)
     N, M = X.shape
@@ -82,8 +82,43 @@ def numpy_med_step(I, W, taper, axis=0):
         for l in range(L):
             for j in range(N):
                 R[k, l] += K[j] / U[j] * sum(x(i - l, j) * x(i - k, j) for i in range(Mf))
+    return R, rhs, K.sum()
+
+
+def numpy_med_step(I, W, taper, axis=0):
+    """One update of eqs. (22)–(24): W ← R⁻¹b / ‖R⁻¹b‖."""
+    R, rhs, ksum = numpy_med_system(I, W, taper, axis)
     Wn = np.linalg.solve(R, rhs)
-    return Wn / np.linalg.norm(Wn), K.sum()
+    return Wn / np.linalg.norm(Wn), ksum
+
+
+def mirror_basis(L):
+    """Columns: e_k + e_{L−1−k} (k < L/2), and e_{(L−1)/2} for odd L: the symmetric filters."""
+    cols = []
+    for k in range((L + 1) // 2):
+        c = np.zeros(L)
+        c[k] = c[L - 1 - k] = 1.0
+        cols.append(c)
+    return np.stack(cols, axis=1)
+
+
+@pytest.mark.parametrize("axis, shape, L", [(0, (40, 12), 9), (1, (11, 36), 8)])
+def test_symmetric_update_equals_numpy_projected_solve(axis, shape, L):
+    """Linear-phase MED: the stationarity condition projected on symmetric filters."""
+    h, w = shape
+    rng = np.random.default_rng(5)
+    centre = wavy_centre(h, w) if axis == 0 else wavy_centre(w, h)
+    I = stripe_image(h, w, centre, noise=2.0) if axis == 0 else stripe_image(w, h, centre).T
+    W = rng.normal(size=L)
+    W /= np.linalg.norm(W)
+    R, rhs, _ = numpy_med_system(I, W, 3, axis)
+    P = mirror_basis(L)
+    ref = P @ np.linalg.solve(P.T @ R @ P, P.T @ rhs)
+    ref /= np.linalg.norm(ref)
+    pb = med_prepare(jnp.asarray(I), axis=axis, L=L, taper=3)
+    Wn, _, _ = med_update(jnp.asarray(W), pb, loading=0.0, symmetric=True)
+    np.testing.assert_allclose(np.asarray(Wn), ref, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(Wn), np.asarray(Wn)[::-1], atol=1e-14)
 
 
 @pytest.mark.parametrize("axis, shape", [(0, (40, 12)), (1, (11, 36)), (0, (33, 7))])
@@ -150,6 +185,32 @@ def test_fixed_point_is_stationary_on_sphere(form):
         d = tangential(rng.normal(size=L), W)
         Wp = W + 1e-3 * d / np.linalg.norm(d)
         assert float(med_objective(jnp.asarray(Wp / np.linalg.norm(Wp)), I, form=form)) <= o
+
+
+def test_symmetric_fixed_point_is_stationary_among_symmetric_filters():
+    """At the linear-phase fixed point, jax.grad of eq. (19) projected on the symmetric
+    filters is normal to the sphere: no symmetric unit filter nearby is better."""
+    h, w = 64, 40
+    I = jnp.asarray(stripe_image(h, w, wavy_centre(h, w), speckle=0.2, noise=1.0, seed=1))
+    L = 16
+    res = med(I, L=L, tol=1e-13, max_steps=400, loading=0.0, symmetric=True)
+    assert bool(res.converged)
+    W = np.asarray(res.filter)
+    np.testing.assert_allclose(W, W[::-1], atol=1e-12)
+    assert float(res.delay) == (L - 1) / 2
+    P = mirror_basis(L)
+    proj = P @ np.linalg.solve(P.T @ P, P.T)  # orthogonal projector on symmetric filters
+    grad = jax.grad(lambda W: med_objective(W, I))
+    flat = np.full(L, 1 / np.sqrt(L))
+    g0 = tangential(proj @ np.asarray(grad(jnp.asarray(flat))), flat)
+    g = tangential(proj @ np.asarray(grad(jnp.asarray(W))), W)
+    assert np.linalg.norm(g) < 1e-5 * np.linalg.norm(g0)
+    o = float(med_objective(jnp.asarray(W), I))
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        d = tangential(proj @ rng.normal(size=L), W)
+        Wp = W + 1e-3 * d / np.linalg.norm(d)
+        assert float(med_objective(jnp.asarray(Wp / np.linalg.norm(Wp)), I)) <= o
 
 
 @pytest.mark.parametrize("init", ["flat", "impulse"])
@@ -355,6 +416,42 @@ def test_band_med_agrees_with_full_frame_med():
     assert abs(np.nanmedian(c_band - truth)) < 0.05 and abs(np.nanmedian(c_full - truth)) < 0.05
 
 
+def skewed_stripe_image(h, w, centre, seed):
+    """A stripe whose profile has a shoulder on one side (a bead's flank), plus noise."""
+    rng = np.random.default_rng(seed)
+    r = np.arange(h)[:, None] - np.asarray(centre)[None, :]
+    core = 100 * np.exp(-0.5 * (r / 1.6) ** 2)
+    shoulder = 35 * np.exp(-0.5 * ((r - 2.5) / 2.5) ** 2)
+    light = 20 * (1 + 0.5 * np.cos(np.pi * np.arange(h)[:, None] / h))
+    return core + shoulder + light + 0.5 * rng.standard_normal((h, w))
+
+
+def test_symmetric_band_med_agrees_with_full_frame_med():
+    """Issue 13: MED on a 64-row band with a linear-phase filter (delay exactly (L−1)/2)
+    gives the full frame's centres. On a stripe with a one-sided shoulder the band's
+    filter moves the centre towards the core, not away from it (full-frame MED keeps
+    Steger's shoulder bias by construction of its ridge delay). Linear-phase MED has more
+    than one fixed point on these stripes: from another frame's filter it can reach a
+    two-lobed filter that copies the stripe 3 px away; that failure and its guard are
+    tested in test_med_bands.py."""
+    H, w = 160, 128
+    truth = 70.0 + 0.137 * np.arange(w) + 2 * np.sin(np.arange(w) / 11)
+    s0 = 48
+    I = jnp.asarray(stripe_image(H, w, truth, speckle=0.3, seed=4))
+    c_full = steger_rows(med(I).output)
+    band = med(I[s0 : s0 + 64], L=16, symmetric=True, max_steps=100)
+    assert bool(band.converged) and float(band.delay) == 7.5
+    c_band = steger_rows(band.output) + s0
+    assert np.mean(np.isfinite(c_band)) > 0.95
+    assert abs(np.nanmedian(c_band - c_full)) < 0.05
+
+    S = jnp.asarray(skewed_stripe_image(H, w, truth, seed=7))
+    bias_full = np.nanmedian(steger_rows(med(S).output) - truth)
+    band = med(S[s0 : s0 + 64], L=16, symmetric=True, max_steps=100)
+    bias_band = np.nanmedian(steger_rows(band.output) + s0 - truth)
+    assert 0 <= bias_band <= bias_full
+
+
 # ---------------------------------------------------------------- dtypes and errors
 
 
@@ -387,3 +484,5 @@ def test_bad_inputs_raise_clear_errors():
         med(I, L=5, init=np.ones(4))
     with pytest.raises(ValueError, match="delay"):
         med(I, L=5, delay="peak")
+    with pytest.raises(ValueError, match="symmetric"):
+        med(I, L=5, delay="centre")
