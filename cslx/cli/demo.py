@@ -42,6 +42,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: Where the closed loop starts, and its initial errors (also printed in the report).
+LOOP_START = dict(start_before_mm=220.0, start_offset_mm=4.0, start_heading_deg=3.0)
+
+
 class _Log:
     def __init__(self):
         self.t0 = time.perf_counter()
@@ -351,7 +355,9 @@ def _report(
     if loop is not None:
         lines += ["## 3. Closed-loop tracking", ""]
         lines += [
-            "The simulated robot starts 250 mm before a T-intersection, 4 mm and 3° off the",
+            f"The simulated robot starts {LOOP_START['start_before_mm']:.0f} mm before a "
+            f"T-intersection, {LOOP_START['start_offset_mm']:g} mm and "
+            f"{LOOP_START['start_heading_deg']:g}° off the",
             "weld; the tracker drives it over a real pseudo-terminal (binary protocol with",
             "CRC-16) along the weld, through the junction turn and onto the crossing weld.",
             "Error: distance from the look-ahead point to the true weld centre line, in",
@@ -393,9 +399,7 @@ def _closed_loop(out: str, seed: int, n: int, log) -> dict | None:
     log(f"closed loop: {n} frames along a weld towards a T-intersection ...")
     # 220 mm before the T: the junction is in view almost at once, and the run ends 40
     # frames after the turn (the stem, the T and the crossing weld in ≈ 260 frames)
-    res = run_closed_loop(
-        n_frames=n, seed=seed, progress=True, start_before_mm=220.0, after_turn_frames=40
-    )
+    res = run_closed_loop(n_frames=n, seed=seed, progress=True, after_turn_frames=40, **LOOP_START)
     plot_closed_loop(res, os.path.join(out, "closed_loop.png"))
     keys = (
         "n_frames n_counted mean_error_mm max_error_mm steady_mean_error_mm steady_max_error_mm "

@@ -44,6 +44,7 @@ from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.med import default_filter_length, initial_filter, med
 from ..segmentation.med_bands import band_snr_scale, first_peak
+from ..segmentation.robust import clipped_mask, fill_clipped
 from ..segmentation.shard import map_frames, platform_vmap_size
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
@@ -135,6 +136,7 @@ class PipelineConfig(eqx.Module):
     roi_med: bool = eqx.field(static=True, default=True)
     roi_symmetric: bool = eqx.field(static=True, default=True)
     med_delay: str = eqx.field(static=True, default="ridge")
+    fill_clipped: bool = eqx.field(static=True, default=True)
     weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
 
     def lengths(self, height: int, width: int) -> tuple[int, int]:
@@ -248,20 +250,23 @@ def _shift(c: Centres, offset) -> Centres:
 
 
 def _full(I, state: PipelineState, config: PipelineConfig):
-    height, width = I.shape
+    I_h, I_v = I if isinstance(I, tuple) else (I, I)
+    height, width = I_h.shape
     L_h, L_v = config.lengths(height, width)
-    ch, Wh, sh, kh = _stripe(I, state.filter_h, 0, L_h, config, config.max_steps, config.use_med)
-    cv, Wv, sv, kv = _stripe(I, state.filter_v, 1, L_v, config, config.max_steps, config.use_med)
+    steps = config.max_steps
+    ch, Wh, sh, kh = _stripe(I_h, state.filter_h, 0, L_h, config, steps, config.use_med)
+    cv, Wv, sv, kv = _stripe(I_v, state.filter_v, 1, L_v, config, steps, config.use_med)
     new = eqx.tree_at(lambda s: (s.filter_h, s.filter_v), state, (Wh, Wv))
     return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new, jnp.zeros((), bool)
 
 
 def _bands(I, state: PipelineState, config: PipelineConfig, max_steps=None):
     max_steps = config.roi_max_steps if max_steps is None else max_steps
-    height, width = I.shape
+    I_h, I_v = I if isinstance(I, tuple) else (I, I)
+    height, width = I_h.shape
     hh, hw = 2 * config.roi_half_h, 2 * config.roi_half_w
-    band_h = lax.dynamic_slice(I, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
-    band_v = lax.dynamic_slice(I, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
+    band_h = lax.dynamic_slice(I_h, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
+    band_v = lax.dynamic_slice(I_v, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
     med_on, sym = config.use_med and config.roi_med, config.roi_symmetric
     L = config.L_roi
     ch, Wh, sh, kh = _stripe(
@@ -311,7 +316,7 @@ def _cold(I, state: PipelineState, config: PipelineConfig):
     """A frame without tracking: the bands of `_first_pass` if the stripes fit, else full."""
     if not config.first_pass:
         return _full(I, state, config)
-    banded, fits = _first_pass(I, state, config)
+    banded, fits = _first_pass(I[0] if isinstance(I, tuple) else I, state, config)
     return lax.cond(
         fits,
         lambda: _bands(I, banded, config, config.max_steps),
@@ -392,6 +397,11 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
     height, width = rgb.shape[:2]
     dtype = state.filter_h.dtype
     I = colour_sum(rgb, config.weights, dtype)
+    if config.fill_clipped:
+        # clipped pixels hold lower bounds: fill each short run along the stripe's search
+        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
+        clip = clipped_mask(rgb)
+        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
     if roi and config.roi_enabled(height, width):
         ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,

@@ -1,7 +1,7 @@
 """Weld-bead features from one laser stripe's 3-D profile, and T-junctions from both stripes.
 
 Section 4.3 of the paper tracks the weld from the stripe profile but gives no algorithm; this
-module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
+module is cslx's own, in five steps per stripe (all fixed-size, jit/vmap-able):
 
 1. **Base plate** — the profile's points (robot frame, mm) are written as (s, z) with s the
    coordinate along the stripe (y_r for the horizontal stripe, x_r for the vertical one).
@@ -19,27 +19,30 @@ module is cslx's own, in four steps per stripe (all fixed-size, jit/vmap-able):
    geometric distance). Width = the chord where the circle meets the plate (h = 0), so the
    toes below the threshold are extrapolated; height (reinforcement) = the circle's apex;
    centre = the apex as a 3-D robot-frame point.
+5. **Position** — the cap model (a circular cap standing on the plate: centre, half-chord,
+   height) fitted by Gauss–Newton with Tukey weights to the bead *and* the plate within
+   `cap_margin_mm` around it (`_cap_fit`): where a glint or a clipped core hides part of the
+   bead the missing points count for nothing and the plate where the cap would stand counts
+   against it, so the bead's centre stays where the visible flanks and toes put it (rendered
+   sunlight, issue 12: the circle fitted to the run alone moved with the visible half).
 
-Junctions (limitation). `weld_features` reports a junction when the vertical stripe crosses
-a bead bounded by plate on both sides, i.e. a crossing weld on bare plate. With the default
-rig the vertical stripe lies along the followed weld's crown when the robot is on track, so
-at a real T the vertical profile is a step (crown level behind the crossing weld, plate
-beyond it) with the crossing bead at the step: that run touches the profile's end and is NOT
-reported by this rule. Detecting the end of the followed bead along the vertical stripe
-(anchoring its plate to the horizontal stripe's plate) is the missing piece.
+Junctions. `weld_features` finds the crossing weld of a T on the vertical stripe with
+`cslx.runtime.junction.crossing_feature`, from the crossing bead's far side, so that it is
+found both where the vertical stripe runs on bare plate beside the followed weld (the default
+rig: 40 mm to its right) and where it runs along the followed bead's flank.
 
 Heading. One frame of the cross sensor does not observe the weld's heading robustly: the
-horizontal stripe crosses the followed weld at one point, and the vertical stripe runs along
-it (on the crown when the robot is centred, where the cross-section is flat and the lateral
-position is ambiguous). `weld_line_from_features` therefore fits the line through several
-bead centres — the tracker's recent horizontal-stripe centres carried into the current
-robot frame by odometry — and reports offset and heading; with one point it reports the
-offset and a NaN heading. A Kalman filter over (offset, heading) in the tracker is the
-intended consumer. Where the vertical stripe crosses the bead's flank, one frame does see
-the heading: `heading_from_vertical` (host NumPy) matches the vertical stripe's heights
-against the cross-section the horizontal stripe measured, shifted along the weld by
-tan θ; it returns NaN where that is ambiguous (on the crown of a centred weld only |θ| is
-seen) or uninformative (bare plate).
+horizontal stripe crosses the followed weld at one point, and the vertical stripe runs on
+bare plate beside it (the default rig) or along it (where the cross-section is flat on the
+crown and the lateral position ambiguous). `weld_line_from_features` therefore fits the
+line through several bead centres — the tracker's recent horizontal-stripe centres carried
+into the current robot frame by odometry — and reports offset and heading; with one point
+it reports the offset and a NaN heading. A Kalman filter over (offset, heading) in the
+tracker is the intended consumer. Where the vertical stripe crosses the bead's flank, one
+frame does see the heading: `heading_from_vertical` (host NumPy) matches the vertical
+stripe's heights against the cross-section the horizontal stripe measured, shifted along
+the weld by tan θ; it returns NaN where that is ambiguous (on the crown of a centred weld
+only |θ| is seen) or uninformative (bare plate).
 """
 
 from __future__ import annotations
@@ -76,6 +79,12 @@ class WeldConfig(eqx.Module):
     fit_scale_mm: circle-fit RMS at which its confidence factor is 0.5.
     junction_min_confidence: a vertical-stripe bead at least this confident is a junction.
     n_huber / n_tukey: IRLS iterations (static: they shape the compiled loop).
+    n_gauss_newton / n_robust: Gauss–Newton steps per circle fit, and Tukey reweightings of
+        the circle fit (its residual scale: 1.4826·MAD, at least twice the plate noise).
+    centre: the bead's position: "cap" (the cap model fitted to the bead and the plate
+        within `cap_margin_mm` of it, `_cap_fit`), "toes" (midpoint of the threshold
+        crossings) or "apex" (of the circle fitted to the run alone); see `stripe_feature`.
+    n_cap: Gauss–Newton steps of the cap model fit.
     """
 
     threshold_mm: float = 0.3
@@ -89,6 +98,10 @@ class WeldConfig(eqx.Module):
     n_huber: int = eqx.field(static=True, default=5)
     n_tukey: int = eqx.field(static=True, default=8)
     n_gauss_newton: int = eqx.field(static=True, default=4)
+    n_robust: int = eqx.field(static=True, default=3)
+    centre: str = eqx.field(static=True, default="cap")
+    cap_margin_mm: float = 4.0
+    n_cap: int = eqx.field(static=True, default=8)
 
 
 class WeldFeature(NamedTuple):
@@ -212,6 +225,43 @@ def _circle_fit(t, h, w, n_iter):
     return a + tm, b, R, rms
 
 
+def _cap_model(p, t):
+    """Height of a circular cap (centre a, half-chord c, height H) on the plate h = 0."""
+    a, c, H = p[0], jnp.abs(p[1]) + 1e-3, jnp.abs(p[2]) + 1e-3
+    R = (c * c + H * H) / (2.0 * H)
+    inside = jnp.square(t - a) < c * c
+    top = jnp.sqrt(jnp.maximum(R * R - jnp.square(t - a), 1e-9)) - (R - H)
+    return jnp.where(inside, top, 0.0)
+
+
+def _cap_fit(t, h, w, p0, sigma, n_iter):
+    """The cap (a, c, H) that best explains the heights h(t), plate points included.
+
+    Gauss–Newton on the vertical residuals with Tukey weights (scale 1.4826·MAD, at least
+    2σ): a point of the plate where the cap would stand counts against it, a stretch of the
+    profile that is missing (a glint) counts for nothing, and points that no cap explains
+    (a centre on the wrong ridge) lose their weight.
+    """
+
+    def res(p):
+        return h - _cap_model(p, t)
+
+    def body(_, carry):
+        p, wr = carry
+        r = jax.lax.stop_gradient(res(p))
+        scale = jnp.maximum(1.4826 * _masked_median(jnp.abs(r), w > 0), 2.0 * sigma)
+        u = r / (4.685 * scale)
+        wr = w * jnp.square(jnp.clip(1.0 - u * u, 0.0, 1.0))
+        J = -jax.jacfwd(_cap_model)(p, t)
+        step = _wls(J, -res(p), wr, 1e-6)
+        new = p + jnp.clip(step, -2.0, 2.0)
+        good = jnp.all(jnp.isfinite(new))
+        return jnp.where(good, new, p), wr
+
+    p, wr = jax.lax.fori_loop(0, n_iter, body, (p0, w))
+    return p, wr
+
+
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
@@ -260,11 +310,25 @@ def stripe_feature(
     run = above & (seg == best)
     n_run = jnp.sum(run.astype(dtype))
 
-    # 4. circular cap
+    # 4. circular cap, refitted with Tukey weights on its geometric residuals: the cap that
+    # best explains the run, whatever a glint or a clipped core left in it
     w_run = run.astype(dtype)
-    a, b, R, rms = _circle_fit(
-        jnp.where(run, t, 0.0), jnp.where(run, h, 0.0), w_run, config.n_gauss_newton
-    )
+    t_run, h_run = jnp.where(run, t, 0.0), jnp.where(run, h, 0.0)
+    a, b, R, rms = _circle_fit(t_run, h_run, w_run, config.n_gauss_newton)
+
+    def robust(_, carry):
+        a, b, R, rms, w = carry
+        d = jnp.sqrt(jnp.maximum(jnp.square(t_run - a) + jnp.square(h_run - b), 1e-12)) - R
+        d = jax.lax.stop_gradient(d)
+        scale = jnp.maximum(1.4826 * _masked_median(jnp.abs(d), run), 2.0 * sigma)
+        u = d / (4.685 * scale)
+        w = w_run * jnp.square(jnp.clip(1.0 - u * u, 0.0, 1.0))
+        ok = jnp.sum(w) >= 0.5 * config.min_points
+        fit = _circle_fit(t_run, h_run, jnp.where(ok, w, w_run), config.n_gauss_newton)
+        return (*fit, jnp.where(ok, w, w_run))
+
+    a, b, R, rms, w_in = jax.lax.fori_loop(0, config.n_robust, robust, (a, b, R, rms, w_run))
+    n_in = jnp.sum(jnp.where(w_in > 0.5, 1.0, 0.0))
     half2 = R * R - b * b
     height = b + R
     convex = b < jnp.sum(w_run * h) / jnp.maximum(n_run, 1.0)
@@ -272,8 +336,39 @@ def stripe_feature(
     extent = jnp.max(jnp.where(run, t, -1e9)) - jnp.min(jnp.where(run, t, 1e9))
     width = jnp.where(half2 > 0, 2.0 * jnp.sqrt(jnp.maximum(half2, 1e-12)), extent)
 
-    # Apex back to (s, z) and to 3-D: the third coordinate from a linear fit q(s, z) over
+    # Toes: where the run's ends cross the threshold, interpolated from the plate point
+    # outside them. Their midpoint is the bead's centre on any symmetric cap whatever the
+    # threshold, and it rests on the points nearest the plate, which the sheen and glints of
+    # the cap (sun, glare) distort least.
+    first = jnp.argmax(run)
+    last = n - 1 - jnp.argmax(run[::-1])
+    prev_below = jax.lax.cummax(jnp.where(below, idx, -1))[first]
+    next_below = jax.lax.cummin(jnp.where(below, idx, n), reverse=True)[last]
+
+    def cross(i_out, i_in):
+        i_out = jnp.clip(i_out, 0, n - 1)
+        t0, h0, t1, h1 = t[i_out], h[i_out], t[i_in], h[i_in]
+        f = jnp.clip((config.threshold_mm - h0) / jnp.where(h1 > h0, h1 - h0, 1.0), 0.0, 1.0)
+        return t0 + f * (t1 - t0)
+
+    toes_mid = 0.5 * (cross(prev_below, first) + cross(next_below, last))
+    # the cap model over the bead and the plate around it
+    half0 = jnp.clip(0.5 * width, 0.5 * config.min_width_mm, 0.5 * config.max_width_mm)
+    near = valid & (jnp.abs(t - a) < half0 + config.cap_margin_mm)
+    p_cap, _ = _cap_fit(
+        jnp.where(near, t, 0.0),
+        jnp.where(near, h, 0.0),
+        near.astype(dtype),
+        jnp.stack([a, half0, jnp.clip(height, 0.1, 10.0)]),
+        sigma,
+        config.n_cap,
+    )
+    ok_cap = jnp.all(jnp.isfinite(p_cap)) & (jnp.abs(p_cap[0] - a) < half0)
+    t_cap = jnp.where(ok_cap, p_cap[0], a)
+    t_c = {"toes": toes_mid, "apex": a, "cap": t_cap}[config.centre]
+    # Centre back to (s, z) and to 3-D: the third coordinate from a linear fit q(s, z) over
     # all valid points (exact for points on one laser plane).
+    a = t_c
     s_c = (a - c1 * height) / norm
     z_c = c0 + (c1 * a + height) / norm
     other = 1 - axis
@@ -299,7 +394,7 @@ def stripe_feature(
     )
     f_fit = 1.0 / (1.0 + jnp.square(rms / config.fit_scale_mm))
     f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
-    f_cover = jnp.clip(n_run / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_run / 15.0, 0, 1)
+    f_cover = jnp.clip(n_in / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_in / 15.0, 0, 1)
     f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
     confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid, 0.0)
     nan = jnp.asarray(jnp.nan, dtype)
@@ -328,14 +423,17 @@ def weld_features(
         profile_h, valid_h: the horizontal stripe's points (W, 3) (robot frame, mm, column
             order) and mask; its bead is the followed weld, position = its y_r (the offset).
         profile_v, valid_v: the vertical stripe's (H, 3) points and mask; a bead here is a
-            crossing weld, position = its x_r (the junction distance).
+            crossing weld (`cslx.runtime.junction.crossing_feature`: found from its far
+            side, beside the followed weld or along its flank), position = its x_r.
         config: WeldConfig.
     Returns:
         (feature_h, feature_v, junction) with junction true when the vertical stripe crosses
         a bead with confidence ≥ config.junction_min_confidence.
     """
+    from .junction import crossing_feature
+
     fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
-    fv = stripe_feature(profile_v, valid_v, VERTICAL_AXIS, config)
+    fv = crossing_feature(profile_v, valid_v, config)
     junction = fv.found & (fv.confidence >= config.junction_min_confidence)
     return fh, fv, junction
 

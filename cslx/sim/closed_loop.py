@@ -109,7 +109,7 @@ def run_closed_loop(
         start_offset_mm, start_heading_deg: initial lateral / heading error of the robot.
         turn_rate: the controller's turning rate at the T, rad/s.
         settle_s: the "steady" statistics leave out the first settle_s seconds (the
-            controller's response to the initial error, time constant ≈ 2.7 s).
+            controller's response to the initial error).
         after_turn_frames: end the run this many frames after the turn was completed
             (None: run all `n_frames`).
         tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.

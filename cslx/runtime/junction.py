@@ -1,0 +1,140 @@
+"""The crossing weld of a T-junction on the vertical stripe, for any placement of the cross.
+
+The vertical stripe runs along x_r. Approaching a T, the crossing weld (the bar) lies across
+it; what lies on the stripe before the bar depends on where the cross sits relative to the
+followed weld (the stem):
+
+- beside the weld (the default rig: 40 mm to its right), bare plate: the bar is a cap bounded
+  by plate on both sides;
+- along the stem's flank: the flank's height (anything from the crown to the toe, changing
+  with the heading) up to the bar, and the bar's cap on top of it.
+
+Beyond the bar (larger x_r, towards the end of the stem) there is plate in both cases. So the
+bar is found from its far side (cslx's own rule): every run of points above the plate
+threshold whose far end (largest x_r) is bounded by plate is a candidate; within half the
+largest bead width of that far toe, its highest point is the bar's apex if the profile falls
+from it towards the toe by the apex height and rises to it from the near side (the flank of
+a stem that the stripe leaves slowly has no such apex); the cap model
+(`cslx.runtime.weld._cap_fit`) is fitted to the points from just before the apex to beyond
+the toe, and its centre is the junction's x_r. Of the candidates the highest apex wins.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from .weld import VERTICAL_AXIS, WeldConfig, WeldFeature, _cap_fit, _check_profile, plate_fit
+
+__all__ = ["crossing_feature"]
+
+
+def crossing_feature(
+    points: Float[Array, "n 3"], valid: Bool[Array, " n"], config: WeldConfig = WeldConfig()
+) -> WeldFeature:
+    """The crossing bead on the vertical stripe, found from its far side (module docstring).
+
+    Args:
+        points: (H, 3) robot-frame points of the vertical stripe (mm), any order along it.
+        valid: (H,) which points exist.
+        config: `cslx.runtime.weld.WeldConfig` (threshold, height and width limits, cap fit).
+    Returns:
+        `WeldFeature` with position = the crossing weld's x_r; jit/vmap-able.
+    """
+    points, valid = _check_profile(points, valid, "crossing_feature")
+    dtype = points.dtype
+    n = points.shape[0]
+    P = jnp.where(valid[:, None], points, 0.0)
+    w0 = valid.astype(dtype)
+    n_valid = jnp.sum(w0)
+    x_raw, z = P[:, VERTICAL_AXIS], P[:, 2]
+    x_mean = jnp.sum(w0 * x_raw) / jnp.maximum(n_valid, 1.0)
+    # sort along x_r (far = large x) so that runs and toes do not depend on the row order
+    key = jnp.where(valid, x_raw, jnp.inf)
+    order = jnp.argsort(key)
+    x = jnp.where(valid, x_raw - x_mean, 0.0)[order]
+    z = z[order]
+    ok = valid[order]
+    (c0, c1), sigma = plate_fit(x, z, ok, config)
+    norm = jnp.sqrt(1.0 + c1 * c1)
+    t = (x + c1 * (z - c0)) / norm
+    h = (z - c0 - c1 * x) / norm
+
+    above = ok & (h > config.threshold_mm)
+    below = ok & ~above
+    idx = jnp.arange(n)
+    # far toe of each run: an above point whose next valid point (larger x) is plate
+    next_valid = jax.lax.cummin(jnp.where(ok, idx, n), reverse=True)
+    nxt = jnp.concatenate([next_valid[1:], jnp.full((1,), n)])
+    nxt_c = jnp.clip(nxt, 0, n - 1)
+    toe = above & (nxt < n) & below[nxt_c]
+    half_max = 0.5 * config.max_width_mm
+    # per candidate toe: the highest point within half_max before it (its apex)
+    dt = t[None, :] - t[:, None]  # [toe, point]: point's t minus the toe's t
+    win = ok[None, :] & (dt <= 0.0) & (dt >= -half_max)
+    h_win = jnp.where(win, h[None, :], -jnp.inf)
+    apex = jnp.argmax(h_win, axis=1)
+    h_apex = h[apex]
+    t_apex = t[apex]
+    t_toe = 0.5 * (t + t[nxt_c])  # between the last bead point and the first plate point
+    half = t_toe - t_apex
+    # rises to the apex from the near side: the lowest point in the half-width before it
+    near = ok[None, :] & (t[None, :] < t_apex[:, None]) & (t[None, :] >= (t_apex - half)[:, None])
+    h_before = jnp.min(jnp.where(near, h[None, :], jnp.inf), axis=1)
+    has_near = jnp.any(near, axis=1)
+    rise = h_apex - jnp.where(has_near, h_before, h_apex)
+    good = (
+        toe
+        & (h_apex >= config.min_height_mm)
+        & (2.0 * half >= config.min_width_mm)
+        & (2.0 * half <= config.max_width_mm)
+        & (rise >= 0.15 * h_apex)
+    )
+    best = jnp.argmax(jnp.where(good, h_apex, -jnp.inf))
+    any_good = jnp.any(good)
+
+    # the cap model on the far half of the bar and the plate beyond it
+    ta, tt, hb = t_apex[best], t_toe[best], h_apex[best]
+    hw = jnp.maximum(tt - ta, 0.5 * config.min_width_mm)
+    sel = ok & (t >= ta - 0.25 * hw) & (t <= tt + config.cap_margin_mm)
+    p, wr = _cap_fit(
+        jnp.where(sel, t, 0.0),
+        jnp.where(sel, h, 0.0),
+        sel.astype(dtype),
+        jnp.stack([ta, hw, hb]),
+        sigma,
+        config.n_cap,
+    )
+    a, c, H = p[0], jnp.abs(p[1]), jnp.abs(p[2])
+    width, height = 2.0 * c, H
+    fit_ok = jnp.all(jnp.isfinite(p)) & (jnp.abs(a - ta) < hw)
+    found = (
+        any_good
+        & fit_ok
+        & (height >= config.min_height_mm)
+        & (width >= config.min_width_mm)
+        & (width <= config.max_width_mm)
+    )
+    # back to (x, z): the apex of the cap
+    x_c = (a - c1 * height) / norm
+    z_c = c0 + (c1 * a + height) / norm
+    pos = x_c + x_mean
+    y_c = jnp.sum(jnp.where(sel, P[order, 1], 0.0)) / jnp.maximum(jnp.sum(sel), 1.0)
+    centre = jnp.stack([pos, y_c, z_c]).astype(dtype)
+    # confidence: share of the far half-cap's points the fit kept × contrast over the noise
+    n_sel = jnp.sum(sel.astype(dtype))
+    kept = jnp.sum(jnp.where(wr > 0.5, 1.0, 0.0)) / jnp.maximum(n_sel, 1.0)
+    f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
+    f_points = jnp.clip(n_sel / 15.0, 0.0, 1.0)
+    confidence = jnp.where(found, kept * f_contrast * f_points, 0.0)
+    nan = jnp.asarray(jnp.nan, dtype)
+    return WeldFeature(
+        found=found,
+        centre=jnp.where(found, centre, nan),
+        position=jnp.where(found, pos, nan),
+        width=jnp.where(found, width, nan),
+        height=jnp.where(found, height, nan),
+        confidence=confidence.astype(dtype),
+        noise_mm=sigma,
+    )
