@@ -1,0 +1,109 @@
+"""The robust detector's pieces (cslx.segmentation.robust / ridges): column profiles at the
+crossing, bridging a clipped crossing, detours, float32 path residuals, the moment-based
+kurtosis grid."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from cslx.segmentation import extract
+from cslx.segmentation.colour import CANDIDATES, search_space
+from cslx.segmentation.ridges import _drop_detours, _local_residual, linked_centres
+from cslx.segmentation.robust import _grid_scores
+
+H, W = 120, 200
+
+
+def _cross(rng, tilt=0.04, noise=2.0):
+    """A horizontal Gaussian stripe (s 1.2 px) crossed by a brighter vertical one (s 1.5 px)."""
+    u = np.arange(W)
+    v_true = 60.3 + tilt * (u - 100)
+    vv, uu = np.arange(H)[:, None], u[None, :]
+    img = 20.0 + 120.0 * np.exp(-0.5 * ((vv - v_true[None, :]) / 1.2) ** 2)
+    img = img + 200.0 * np.exp(-0.5 * ((uu - 120.4 - 0.02 * vv) / 1.5) ** 2)
+    return img + rng.normal(0, noise, img.shape), v_true
+
+
+def test_column_profiles_measure_through_the_crossing():
+    rng = np.random.default_rng(11)
+    img, v_true = _cross(rng)
+    c, _ = linked_centres(img, sigma=2.0, sigma_along=4.0)
+    pos = np.asarray(c.pos)
+    near = np.abs(np.arange(W) - 120) <= 6  # the other stripe's core and flanks
+    assert np.isfinite(pos[near]).all()
+    # A tilted straight stripe has a symmetric column profile: no bias from the crossing
+    # stripe, which is (nearly) constant along the column. Tolerance: 5 noise std.
+    err = np.abs(pos - v_true)
+    assert err[near].max() < 0.15
+    assert np.nanmax(err[4:-4]) < 0.15
+
+
+def test_local_residual_stays_exact_far_from_column_zero_in_float32():
+    n = 640
+    x = np.arange(n)
+    pos = (200.0 + 0.37 * x).astype(np.float32)
+    pos[600] += 2.0
+    r = np.asarray(_local_residual(jnp.asarray(pos), jnp.ones(n, bool), 6))
+    assert abs(r[600] - 2.0) < 1e-3
+    others = np.abs(np.delete(r, np.arange(594, 607)))
+    assert others.max() < 1e-3  # global sums of x² in float32 were off by pixels here
+
+
+def test_short_detours_are_dropped_long_pieces_kept():
+    n = 200
+    pos = 50.0 + 0.1 * np.arange(n)
+    valid = np.ones(n, bool)
+    valid[80:86] = False
+    valid[92:100] = False
+    pos[86:92] += 20.0  # six centres on something else between two gaps
+    out = np.asarray(_drop_detours(jnp.asarray(pos), jnp.asarray(valid)))
+    assert not out[86:92].any()
+    assert out[:80].all() and out[100:].all()
+    # The same piece on the line stays.
+    pos[86:92] -= 20.0
+    out = np.asarray(_drop_detours(jnp.asarray(pos), jnp.asarray(valid)))
+    assert out[86:92].all()
+
+
+def _clipped_cross(rng):
+    """Red horizontal stripe clipped in R over ≈ 6 px, crossed by a vertical stripe whose
+    core is white (every channel clipped) over ≈ 9 columns."""
+    vv, uu = np.arange(H)[:, None].astype(float), np.arange(W)[None, :].astype(float)
+    v_true = 60.37 + 0.03 * (np.arange(W) - 100)
+    h = np.exp(-0.5 * ((vv - v_true[None, :]) / 2.5) ** 2)
+    v = np.exp(-0.5 * ((uu - 110.2) / 3.0) ** 2) * np.ones((H, 1))
+    r = 40 + 700 * h + 2000 * v
+    g = 38 + 40 * h + 2000 * v
+    b = 38 + 25 * h + 2000 * v
+    rgb = np.stack([r, g, b], -1) + rng.normal(0, 1.5, (H, W, 3))
+    return np.clip(np.round(rgb), 0, 255).astype(np.uint8), v_true
+
+
+def test_stretch_hidden_by_a_clipped_crossing_is_bridged_and_flagged():
+    rng = np.random.default_rng(12)
+    rgb, v_true = _clipped_cross(rng)
+    white = (rgb >= 254).all(-1).all(0)
+    assert white.sum() >= 6  # columns with no information on the horizontal stripe
+    c = extract(rgb, "linked", space="r-g", stripe="h")
+    pos, sat = np.asarray(c.pos), np.asarray(c.saturated)
+    assert np.isfinite(pos[white]).all()
+    assert sat[white].all()
+    assert np.abs(pos[white] - v_true[white]).max() < 0.3
+    sig = np.asarray(c.sigma)
+    assert np.isfinite(sig[white]).all() and (sig[white] > 0).all()
+    # Away from the crossing the (R-clipped, filled) core is measured.
+    far = np.abs(np.arange(W) - 110) > 30
+    assert np.isfinite(pos[far]).mean() > 0.95
+    assert np.nanmedian(np.abs(pos[far] - v_true[far])) < 0.1
+
+
+def test_moment_grid_scores_equal_the_direct_search():
+    rng = np.random.default_rng(13)
+    img, _ = _cross(rng)
+    sun = rng.uniform(40, 120, (H, W))[..., None] * np.array([1.0, 0.97, 0.93])
+    rgb = sun + img[..., None] * np.array([1.0, 0.07, 0.04]) + rng.normal(0, 2, (H, W, 3))
+    rgb = jnp.asarray(rgb)  # float64 under the test configuration
+    _, direct = search_space(rgb, axis=0)
+    moments = _grid_scores(rgb, CANDIDATES)
+    np.testing.assert_allclose(np.asarray(moments), np.asarray(direct), rtol=1e-6, atol=1e-6)
