@@ -126,7 +126,11 @@ class KalmanConfig:
     # 34 mm for a 14 mm bead at dev seed 1201), and those are the frames whose position is off
     width_tol: float = 0.2
     width_memory: int = 20
-    # fuse the heading the vertical stripe sees directly (`weld.heading_from_vertical`)
+    # fuse the heading the vertical stripe sees directly (`weld.heading_from_vertical`). Off:
+    # on rendered approaches with the stripe along the bead's flank (dev seed 1201, with
+    # odometry) it made the heading error worse, mean 0.51° → 1.34° (clean) and 0.60° → 1.70°
+    # (sun), though a heading was then reported on every frame; beside the weld it never
+    # sees the weld's direction (NaN)
     use_vertical_heading: bool = False
     sigma_heading_floor_deg: float = 0.3  # its standard deviation at least this
 
