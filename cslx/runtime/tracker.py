@@ -324,15 +324,16 @@ class _WeldLineFilter:
 def tracking_config():
     """The tracker's default pipeline: `PipelineConfig` without MED (Steger on R − G).
 
-    Why (issue 12, rendered approaches to a T at dev seed 1201, 48 frames per nuisance kind,
-    with odometry, `experiments/tracking_sequences.py`): with MED the tracked offset error was
-    mean / max 0.076 / 0.19 mm (clean), 0.17 / 0.40 (glare), 0.089 / 0.22 (shadow); without it
-    0.076 / 0.19, 0.080 / 0.32, 0.075 / 0.18, and the horizontal stripe's centres on the
-    bead's columns were closer to the truth (median 0.125 px against 0.150 px clean, 0.13 px
-    against 0.38 px in sun). In sunlight MED's filter, learnt on the whole band, moves the
-    stripe where the bead's sheen lies under it; the clipped-core fill
-    (`PipelineConfig.fill_clipped`) and Steger's detector alone keep it in place. MED stays
-    the default of `PipelineConfig` (the paper's method, Table 6).
+    Why (issue 12, rendered passes along a weld at dev seed 1201, 48 frames per nuisance kind,
+    with odometry, `experiments/tracking_sequences.py`, bead position from the cap model):
+    with MED the tracked offset error was mean / max 0.17 / 0.40 mm (glare) and 0.089 / 0.22
+    (shadow); without it 0.080 / 0.32 and 0.075 / 0.18 (clean 0.076 / 0.19). On the
+    horizontal stripe's centres in bead columns (rendered video, seed 101) the median error
+    was 0.150 px with MED and 0.125 px without (clean), 0.38 px and 0.13 px in sun: in
+    sunlight MED's filter, learnt on the whole band, moves the stripe where the bead's sheen
+    lies under it, while the clipped-core fill (`PipelineConfig.fill_clipped`) and Steger's
+    detector alone keep it in place. MED stays the default of `PipelineConfig` (the
+    paper's method, Table 6).
     """
     from .pipeline import PipelineConfig
 
