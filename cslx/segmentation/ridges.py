@@ -122,7 +122,7 @@ def noise_std(image: jax.Array) -> jax.Array:
         - image[2:, 1:-1]
         - image[1:-1, :-2]
         - image[1:-1, 2:]
-    ).reshape(-1)
+    )[::2, ::2].reshape(-1)  # a quarter of the pixels: the scale, at a quarter of the cost
     mad = _median(jnp.abs(lap - _median(lap)))
     return lax.stop_gradient(1.4826 * mad / math.sqrt(20.0))
 
