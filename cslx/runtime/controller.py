@@ -42,7 +42,9 @@ FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_
 the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm ahead, 70
 sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
 junction distance x_j is dead-reckoned (x_j −= v dt) between sightings and reset by each
-sighting; when x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
+sighting that agrees with it within `junction_gate_mm` (issue 12: in rendered sunlight a stray
+report where the stripes cross, 42 mm from the truth, pushed the turn past the T); when
+x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
 (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
 turned angle is integrated from the commanded ω, or from the measured heading when the
 caller passes it → FOLLOW, ignoring junction sightings for `junction_ignore_mm` of travel.
@@ -89,6 +91,7 @@ class ControllerConfig:
     junction_tolerance_mm: float = 2.0
     junction_ignore_mm: float = 150.0
     junction_min_confidence: float = 0.3
+    junction_gate_mm: float = 15.0  # a later sighting farther than this from x_j is ignored
     blind_stop_s: float = 0.5  # s without a confident observation → stop
 
     def __post_init__(self):
@@ -262,7 +265,7 @@ class PathController:
             # the followed weld and sees no bead. Expected: go straight, dead-reckoning on
             # odometry, while the frames confirm the plate (else the blind stop above).
             if sighted:
-                self.junction_x = float(junction_x_mm)
+                self._sight(float(junction_x_mm))
             v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
             self._advance_junction(v, dt)
             if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:
@@ -276,7 +279,7 @@ class PathController:
         if self._ignore_left > 0:
             junction = False
         if junction and confidence >= c.junction_min_confidence and math.isfinite(junction_x_mm):
-            self.junction_x = float(junction_x_mm)
+            self._sight(float(junction_x_mm))
             if self.state is State.FOLLOW:
                 self.state = State.APPROACH_JUNCTION
 
@@ -291,6 +294,14 @@ class PathController:
         v, w = self._limit(v_t, w_t, dt)
         self._advance_junction(v, dt)
         return self._emit(v, w)
+
+    def _sight(self, x_mm: float) -> None:
+        """A junction sighting: the first one sets x_j; later ones correct it only when they
+        agree with the dead-reckoned x_j within `junction_gate_mm` (a stray report, e.g. where
+        the two stripes cross, must not push the turning point back)."""
+        gate = self.config.junction_gate_mm
+        if self.junction_x is None or abs(x_mm - self.junction_x) <= gate:
+            self.junction_x = x_mm
 
     def _approach_speed(self, speed: float) -> float:
         """Speed that can still brake (accel_max) to rest at the turning point."""

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.interpolate import Akima1DInterpolator
 
 from .steger import Centres
 
@@ -141,6 +140,10 @@ def _fitter(kind: str, knot_spacing: int):
         return lambda q: np.polyval(coef, np.asarray(q, float) - x0)
 
     def akima(x, y):
+        # Imported here: scipy.interpolate costs ≈ 0.5 s of every start-up that imports
+        # cslx.segmentation (the tracker's too), and only AA needs it.
+        from scipy.interpolate import Akima1DInterpolator
+
         k = max(len(x) // knot_spacing, 1)
         if k < 3:
             return poly(x, y, 2 if k == 2 else 1)

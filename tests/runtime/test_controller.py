@@ -334,3 +334,20 @@ def test_kinematic_loop_settles_within_the_tracking_goal(seed):
     steady = e[int(5.0 / 0.05) :]
     assert steady.mean() <= 0.2, steady.mean()
     assert steady.max() <= 0.5, steady.max()
+
+
+def test_stray_sighting_does_not_move_the_junction():
+    """Approaching a T, a report far from the dead-reckoned junction is ignored; one that
+    agrees with it corrects it."""
+    ctrl = PathController(ControllerConfig())
+    _approaching(ctrl, junction_x=100.0)
+    x0 = ctrl.junction_x
+    ctrl.update(
+        0.05, math.nan, math.nan, 0.0, junction=True, junction_x_mm=x0 + 40.0, sensor_ok=True
+    )
+    x1 = ctrl.junction_x
+    assert x1 < x0  # dead-reckoned only
+    ctrl.update(
+        0.05, math.nan, math.nan, 0.0, junction=True, junction_x_mm=x1 - 3.0, sensor_ok=True
+    )
+    assert ctrl.junction_x == pytest.approx(x1 - 3.0 - ctrl.v * 0.05, abs=0.5)
