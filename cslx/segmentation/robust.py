@@ -59,12 +59,11 @@ move its centre and 6 px smoothing along the stripe spreads that; the first vers
 0.69 % / 0.145 mm there); median ≤ 0.03 mm and p95 ≤ 0.1 mm: the error is laser speckle
 (contrast 0.5, ≈ 1 px grain): on a clean rendered scene the median is 0.08 px with speckle
 and 0.01 px without, and averaging more of it along the stripe costs the bead's corners
-(above). Cost per frame and stripe, warm, horizontal / vertical: 48 / 52 ms of CPU time
-(median of 27 calls over 9 development frames of every condition; wall time in the experiment
-76 / 80 ms, the old default's 100 / 110 ms, with the shared 2-core machine at load 6–8),
-against ≈ 700 ms before (the 74-image kurtosis search alone took 2.1 s under load, two 2-D
-Hessian passes and whole-frame sorts for the medians). About half is the column candidates
-(filters, non-maximum suppression, top K), a third the colour search and the clipped fill.
+(above). Cost per frame and stripe, warm, horizontal / vertical: 32 / 32 ms of CPU time
+(median of 27 calls over 9 development frames of every condition); wall time in the experiment
+31 / 31 ms, the old default's (MED + Steger) 68 / 76 ms, with the shared 2-core machine at load
+5–7; ≈ 700 ms before this rework (the 74-image kurtosis search alone took 2.1 s under load,
+two 2-D Hessian passes, whole-frame sorts for the medians, filters fused badly along axis 0).
 """
 
 from __future__ import annotations
