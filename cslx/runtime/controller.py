@@ -43,7 +43,9 @@ the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm 
 sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
 junction distance x_j is dead-reckoned (x_j −= v dt) between sightings and reset by each
 sighting that agrees with it within `junction_gate_mm` (issue 12: in rendered sunlight a stray
-report where the stripes cross, 42 mm from the truth, pushed the turn past the T); when
+report where the stripes cross, 42 mm from the truth, pushed the turn past the T), or by
+three rejected sightings in a row that agree with each other (the first sighting was the
+stray one); when
 x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
 (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
 turned angle is integrated from the commanded ω, or from the measured heading when the
@@ -143,6 +145,7 @@ class PathController:
         self.v = 0.0
         self.omega = 0.0
         self.junction_x: float | None = None
+        self._stray: list[float] = []  # junction sightings the gate rejected, dead-reckoned
         self.turned = 0.0
         self._turn_start_heading: float | None = None
         self._ignore_left = 0.0
@@ -251,6 +254,7 @@ class PathController:
                 self._ignore_left = c.junction_ignore_mm
                 self.turns_completed += 1
                 self.junction_x = None
+                self._stray = []
                 v_t, w_t = 0.0, 0.0
             else:
                 # slow down near the end so the angle does not overshoot (|ω| ≤ √(2 α θ))
@@ -302,6 +306,13 @@ class PathController:
         gate = self.config.junction_gate_mm
         if self.junction_x is None or abs(x_mm - self.junction_x) <= gate:
             self.junction_x = x_mm
+            self._stray = []
+            return
+        # three rejected sightings in a row that agree with each other: x_j was wrong
+        self._stray = [*self._stray[-2:], x_mm]
+        if len(self._stray) == 3 and max(self._stray) - min(self._stray) <= gate:
+            self.junction_x = x_mm
+            self._stray = []
 
     def _approach_speed(self, speed: float) -> float:
         """Speed that can still brake (accel_max) to rest at the turning point."""
@@ -317,6 +328,7 @@ class PathController:
     def _advance_junction(self, v: float, dt: float) -> None:
         if self.junction_x is not None:
             self.junction_x -= v * dt
+        self._stray = [x - v * dt for x in self._stray]
         self._ignore_left = max(0.0, self._ignore_left - abs(v) * dt)
 
     def stop(self) -> Command:

@@ -126,7 +126,9 @@ class KalmanConfig:
     # 34 mm for a 14 mm bead at dev seed 1201), and those are the frames whose position is off
     width_tol: float = 0.2
     width_memory: int = 20
-    # fuse the heading the vertical stripe sees directly (`weld.heading_from_vertical`)
+    # fuse the heading the vertical stripe sees (`weld.heading_from_vertical`). Off: along the
+    # bead's flank (dev seed 1201, odometry) the heading error went 0.51° → 1.34° (clean),
+    # 0.60° → 1.70° (sun); beside the weld it never sees the weld's direction
     use_vertical_heading: bool = False
     sigma_heading_floor_deg: float = 0.3  # its standard deviation at least this
 
@@ -320,15 +322,12 @@ class _WeldLineFilter:
 def tracking_config():
     """The tracker's default pipeline: `PipelineConfig` without MED (Steger on R − G).
 
-    Why (issue 12, rendered approaches to a T at dev seed 1201, 48 frames per nuisance kind,
-    with odometry, `experiments/tracking_sequences.py`): with MED the tracked offset error was
-    mean / max 0.076 / 0.19 mm (clean), 0.17 / 0.40 (glare), 0.089 / 0.22 (shadow); without it
-    0.076 / 0.19, 0.080 / 0.32, 0.075 / 0.18, and the horizontal stripe's centres on the
-    bead's columns were closer to the truth (median 0.125 px against 0.150 px clean, 0.13 px
-    against 0.38 px in sun). In sunlight MED's filter, learnt on the whole band, moves the
-    stripe where the bead's sheen lies under it; the clipped-core fill
-    (`PipelineConfig.fill_clipped`) and Steger's detector alone keep it in place. MED stays
-    the default of `PipelineConfig` (the paper's method, Table 6).
+    Why (issue 12; rendered passes at dev seed 1201, 48 frames per nuisance kind, odometry,
+    `experiments/tracking_sequences.py`): offset error mean / max with MED 0.17 / 0.40 mm
+    (glare), 0.089 / 0.22 (shadow); without 0.080 / 0.32, 0.075 / 0.18 (clean 0.076 / 0.19).
+    Centres in bead columns (seed 101): median 0.150 → 0.125 px (clean), 0.38 → 0.13 px (sun),
+    where MED's filter moves the stripe under the bead's sheen. MED stays the default of
+    `PipelineConfig` (the paper's method, Table 6).
     """
     from .pipeline import PipelineConfig
 

@@ -85,6 +85,8 @@ class WeldConfig(eqx.Module):
         within `cap_margin_mm` of it, `_cap_fit`), "toes" (midpoint of the threshold
         crossings) or "apex" (of the circle fitted to the run alone); see `stripe_feature`.
     n_cap: Gauss–Newton steps of the cap model fit.
+    crossing_mask_mm: vertical-stripe points this close (x_r) to the horizontal stripe are
+        left out of the junction search (`weld_features`).
     """
 
     threshold_mm: float = 0.3
@@ -100,6 +102,7 @@ class WeldConfig(eqx.Module):
     n_gauss_newton: int = eqx.field(static=True, default=4)
     n_robust: int = eqx.field(static=True, default=3)
     centre: str = eqx.field(static=True, default="cap")
+    crossing_mask_mm: float = 5.0
     cap_margin_mm: float = 4.0
     n_cap: int = eqx.field(static=True, default=8)
 
@@ -433,7 +436,11 @@ def weld_features(
     from .junction import crossing_feature
 
     fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
-    fv = crossing_feature(profile_v, valid_v, config)
+    # where the stripes cross, the vertical stripe's centres are pulled by the horizontal
+    # one: in rendered sunlight every stray junction report lay within 10 mm of it
+    x_h = jnp.nanmedian(jnp.where(valid_h, profile_h[:, VERTICAL_AXIS], jnp.nan))
+    away = jnp.abs(profile_v[:, VERTICAL_AXIS] - x_h) > config.crossing_mask_mm
+    fv = crossing_feature(profile_v, valid_v & (away | ~jnp.isfinite(x_h)), config)
     junction = fv.found & (fv.confidence >= config.junction_min_confidence)
     return fh, fv, junction
 

@@ -122,7 +122,7 @@ def noise_std(image: jax.Array) -> jax.Array:
         - image[2:, 1:-1]
         - image[1:-1, :-2]
         - image[1:-1, 2:]
-    ).reshape(-1)
+    )[::2, ::2].reshape(-1)  # a quarter of the pixels: the scale, at a quarter of the cost
     mad = _median(jnp.abs(lap - _median(lap)))
     return lax.stop_gradient(1.4826 * mad / math.sqrt(20.0))
 
@@ -187,27 +187,30 @@ def _candidates_column(image, sigma: float, k: int, sigma_along: float) -> Candi
     column a straight stripe of any tilt has a symmetric profile, so no normal is needed, and
     the other stripe of the cross — constant along the column — adds nothing to r_v, r_vv.
     """
-    (a,) = _filter_axis(image, sigma_along, (0,), 1)
-    smooth, rv, rvv = _filter_axis(a, sigma, (0, 1, 2), 0)
+    # Work on the transpose (columns as rows): the filters across the stripe, the
+    # non-maximum suppression and top K then run along the contiguous axis, which XLA's CPU
+    # fusions handle ≈ 3× faster than the same along axis 0 (35 → 10 ms per frame).
+    x = image.T
+    (a,) = _filter_axis(x, sigma_along, (0,), 0)
+    smooth, rv, rvv = _filter_axis(a, sigma, (0, 1, 2), 1)  # (W, H)
     tiny = jnp.finfo(image.dtype).tiny
     neg = rvv < 0
-    t = jnp.where(neg, -rv / jnp.where(neg, rvv, -1.0), 0.0)
-    strength = -rvv
-    score = jnp.where(neg & (jnp.abs(t) <= 0.6), strength, 0.0)
-    up = jnp.pad(score[:-1], ((1, 0), (0, 0)))
-    down = jnp.pad(score[1:], ((0, 1), (0, 0)))
+    score = jnp.where(neg & (jnp.abs(rv) <= -0.6 * rvv), -rvv, 0.0)  # |t| ≤ 0.6
+    up = jnp.pad(score[:, :-1], ((0, 0), (1, 0)))
+    down = jnp.pad(score[:, 1:], ((0, 0), (0, 1)))
     score = jnp.where((score > up) & (score >= down), score, 0.0)
-    top, idx = lax.top_k(score.T, k)  # (W, K)
-    col = jnp.arange(score.shape[1])[:, None]
-    pos = idx.astype(image.dtype) + jnp.clip(t[idx, col], -1.0, 1.0)
+    top, idx = lax.top_k(score, k)  # (W, K)
+    col = jnp.arange(score.shape[0])[:, None]
+    t = -rv[col, idx] / jnp.minimum(rvv[col, idx], -tiny)
+    pos = idx.astype(image.dtype) + jnp.clip(jnp.where(top > 0, t, 0.0), -1.0, 1.0)
     # Noise level of −r_vv: the median |r_vv| (× 1.18, the mean-to-median ratio of |Gaussian|,
     # so that z matches the Hessian candidates' mean |λ| on noise) — the median, not the
     # mean, because after smoothing along the stripe a broad or clipped stripe can dominate
     # the frame's mean.
     scale = 1.1829 * _median(jnp.abs(rvv[::2, ::2]).reshape(-1))
     z = top / jnp.maximum(scale, tiny)
-    background = _median(smooth, axis=0)
-    r = smooth[idx, col] - background[:, None]
+    background = _median(smooth, axis=1)
+    r = smooth[col, idx] - background[:, None]
     lam = jnp.maximum(top, tiny)
     s2 = jnp.clip(r / lam - sigma**2, 0.09, 2500.0)
     width = jnp.where(top > 0, jnp.sqrt(s2), 0.3)

@@ -9,8 +9,7 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    Σ(I − μ)² and Σ(I − μ)⁴ are a quadratic and a quartic form in the weights, so 6 + 15
    moment sums per column replace 74 monochrome images; equal to `colour.search_space` to
    rounding, tested) on every `SEARCH_STRIDE`-th column (row): on the 72 development searches
-   (seeds 7100–7117, both stripes) the choice equals the full search's 71 times, once
-   2R − G − B instead of R − G.
+   (seeds 7100–7117, both stripes) the choice equals the full search's every time.
 2. Clipped cores. A pixel with any channel at the sensor's maximum holds a lower bound, not
    a value. Along the search axis, every run of clipped pixels at most `max_run` long gets the
    constant 1.5 × max(value of its two unclipped neighbours) in the monochrome image
@@ -47,9 +46,10 @@ with 0.07 / 0.27 % gross, median 0.060 / 0.088 mm, p95 0.214 / 0.459 mm. Every c
 the printed target has 0.00 % gross (green vertical 0.05 %) and 100 % detection
 (saturated + sun vertical 99.74 %); the crossing of two clipped stripes, the worst case
 before (0.75–2.2 % gross), is now clean. The old default (MED + Steger, R−G, σ 2): 86.55 /
-89.47 %, 41.33 / 42.83 % gross, medians 0.294 / 0.371 mm. MED in front of linked still makes
-it worse (gross 18.8 % horizontal, from the saturated conditions), so MED is not part of it;
-the paper's MED + Steger stays as method "med" (Table 6). Flat wall, no bead in view
+89.47 %, 41.33 / 42.83 % gross, medians 0.294 / 0.371 mm. MED in front of linked (horizontal
+stripe) makes the median worse on every preset and laser colour (by 3–9 %) and breaks
+saturated cores (25.6 % gross), so MED is not part of it; the paper's MED + Steger stays as
+method "med" (Table 6). Flat wall, no bead in view
 (rendered, seeds 41–42): undistorted centres scatter 0.061–0.067 px RMS about a straight line
 for saturated horizontal stripes (0.08–0.10 px vertical; MED + Steger 1.5–3.6 px).
 
@@ -59,11 +59,11 @@ move its centre and 6 px smoothing along the stripe spreads that; the first vers
 0.69 % / 0.145 mm there); median ≤ 0.03 mm and p95 ≤ 0.1 mm: the error is laser speckle
 (contrast 0.5, ≈ 1 px grain): on a clean rendered scene the median is 0.08 px with speckle
 and 0.01 px without, and averaging more of it along the stripe costs the bead's corners
-(above). Cost per frame and stripe, warm: 60–68 ms CPU time (median over 12 calls; wall
-57 / 63 ms in the experiment, 91–106 ms in a separate run, with the shared 2-core machine at
-load 8–11), against ≈ 700 ms before (the 74-image kurtosis search alone took 2.1 s under load,
-two 2-D Hessian passes and whole-frame sorts for the medians): the ≤ 50 ms goal of this
-session is close but not met.
+(above). Cost per frame and stripe, warm, horizontal / vertical: 32 / 32 ms of CPU time
+(median of 27 calls over 9 development frames of every condition); wall time in the experiment
+31 / 31 ms, the old default's (MED + Steger) 68 / 76 ms, with the shared 2-core machine at load
+5–7; ≈ 700 ms before this rework (the 74-image kurtosis search alone took 2.1 s under load,
+two 2-D Hessian passes, whole-frame sorts for the medians, filters fused badly along axis 0).
 """
 
 from __future__ import annotations
@@ -98,7 +98,7 @@ CLIP_LEVEL = 254.0
 #: Longest clipped run (px along the search axis) treated as a saturated laser core.
 MAX_RUN = 24
 #: The kurtosis search scores every SEARCH_STRIDE-th column (row) of the frame.
-SEARCH_STRIDE = 4
+SEARCH_STRIDE = 8
 #: Floor, slope and ceiling of the width-aware σ. Steger's condition is σ ≥ s (Gaussian
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
 #: 2.5 / 3.5 / 4.5 px gave median errors 0.090 / 0.084 / 0.073 mm at the same detection and
@@ -295,15 +295,21 @@ def linked_extract(
         final = stripe_sigma(width)
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
-    f = filled if axis == 0 else filled.T
-    b = blind if axis == 0 else blind.T
-    pos, valid, sig, bridged = _bridge(c.pos, c.valid, c.sigma, b)
-    n_along = f.shape[0]
-    near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, n_along - 1)
-    sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
+    pos, valid, sig, sat = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )
+
+
+@functools.partial(jax.jit, static_argnames=("axis",))
+def _finish(pos, valid, sigma, filled, blind, *, axis: int):
+    """Bridging (`_bridge`) and the `saturated` flags, in one compiled call."""
+    f = filled if axis == 0 else filled.T
+    b = blind if axis == 0 else blind.T
+    pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
+    near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, f.shape[0] - 1)
+    sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
+    return pos, valid, sig, sat
 
 
 #: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.

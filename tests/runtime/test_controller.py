@@ -351,3 +351,15 @@ def test_stray_sighting_does_not_move_the_junction():
         0.05, math.nan, math.nan, 0.0, junction=True, junction_x_mm=x1 - 3.0, sensor_ok=True
     )
     assert ctrl.junction_x == pytest.approx(x1 - 3.0 - ctrl.v * 0.05, abs=0.5)
+
+
+def test_junction_reacquired_when_the_first_sighting_was_stray():
+    """A stray first sighting sets x_j; three later sightings that agree with each other and
+    not with it move x_j to them."""
+    ctrl = PathController(ControllerConfig())
+    _approaching(ctrl, junction_x=150.0)  # the stray report (where the stripes cross)
+    true_x = 215.0
+    for _ in range(3):
+        ctrl.update(0.05, 0.0, 0.0, 0.9, junction=True, junction_x_mm=true_x)
+        true_x -= ctrl.v * 0.05
+    assert ctrl.junction_x == pytest.approx(true_x, abs=2.0)
