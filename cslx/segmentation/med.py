@@ -297,7 +297,10 @@ def med(
             (L − 1)/2, the delay of a linear-phase filter.
         ridge_sigma: detector scale of the ``"ridge"`` delay (Steger's σ downstream).
         symmetric: restrict W to linear-phase filters W_k = W_{L−1−k} (module notes; the
-            pipeline's bands).
+            pipeline's bands). Meant for short filters on bands: linear-phase MED has
+            several fixed points, and with L = M/2 on synthetic full frames it converged to
+            filters with two lobes far apart that copy the stripe 28–43 px away;
+            `cslx.segmentation.med_bands` checks its band results against the input.
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
