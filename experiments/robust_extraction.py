@@ -130,6 +130,11 @@ def main(
     pools: dict[tuple[str, str, str], C.Pool] = {}
     timing_images = []
     t0 = time.time()
+
+    def write(times, done):
+        return _write(pools, times, conds, frames, seed, quick, time_calls, med_v, load_start,
+                      t0, out, done, methods)  # fmt: skip
+
     for c, (kind, nuisance) in enumerate(conds):
         for i in range(frames):
             image, gt = C.frame_at(kind, nuisance, seed + c, i, sensor)
@@ -145,21 +150,7 @@ def main(
                     for key in ((nuisance, stripe, method), ("all", stripe, method)):
                         pools.setdefault(key, C.Pool()).add(*res)
         print(f"{kind}/{nuisance}: {time.time() - t0:.0f} s", flush=True)
-        _write(
-            pools,
-            {},
-            conds,
-            frames,
-            seed,
-            quick,
-            time_calls,
-            med_v,
-            load_start,
-            t0,
-            out,
-            c + 1,
-            methods,
-        )
+        write({}, c + 1)  # the tables so far: an interrupted run keeps what it scored
     times = {}
     for stripe in ("h", "v"):
         for method in methods:
@@ -172,21 +163,7 @@ def main(
             times[(stripe, method)] = C.time_calls(
                 run, timing_images, time_calls, budget_s=60.0, warmup=1
             )
-    return _write(
-        pools,
-        times,
-        conds,
-        frames,
-        seed,
-        quick,
-        time_calls,
-        med_v,
-        load_start,
-        t0,
-        out,
-        len(conds),
-        methods,
-    )
+    return write(times, len(conds))
 
 
 def _write(
