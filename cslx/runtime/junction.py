@@ -25,7 +25,15 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-from .weld import VERTICAL_AXIS, WeldConfig, WeldFeature, _cap_fit, _check_profile, plate_fit
+from .weld import (
+    VERTICAL_AXIS,
+    WeldConfig,
+    WeldFeature,
+    _cap_fit,
+    _check_profile,
+    _feature,
+    plate_fit,
+)
 
 __all__ = ["crossing_feature"]
 
@@ -128,13 +136,4 @@ def crossing_feature(
     f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
     f_points = jnp.clip(n_sel / 15.0, 0.0, 1.0)
     confidence = jnp.where(found, kept * f_contrast * f_points, 0.0)
-    nan = jnp.asarray(jnp.nan, dtype)
-    return WeldFeature(
-        found=found,
-        centre=jnp.where(found, centre, nan),
-        position=jnp.where(found, pos, nan),
-        width=jnp.where(found, width, nan),
-        height=jnp.where(found, height, nan),
-        confidence=confidence.astype(dtype),
-        noise_mm=sigma,
-    )
+    return _feature(found, centre, pos, width, height, confidence, sigma, dtype)

@@ -133,6 +133,20 @@ class WeldLine(NamedTuple):
     heading_valid: Bool[Array, ""]
 
 
+def _feature(found, centre, pos, width, height, confidence, sigma, dtype) -> WeldFeature:
+    """A `WeldFeature` whose measurements are NaN where nothing was `found`."""
+    nan = jnp.asarray(jnp.nan, dtype)
+    return WeldFeature(
+        found=found,
+        centre=jnp.where(found, centre, nan),
+        position=jnp.where(found, pos, nan),
+        width=jnp.where(found, width, nan),
+        height=jnp.where(found, height, nan),
+        confidence=confidence.astype(dtype),
+        noise_mm=sigma,
+    )
+
+
 def _check_profile(points, valid, name):
     points = jnp.asarray(points)
     valid = jnp.asarray(valid)
@@ -400,16 +414,7 @@ def stripe_feature(
     f_cover = jnp.clip(n_in / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_in / 15.0, 0, 1)
     f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
     confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid, 0.0)
-    nan = jnp.asarray(jnp.nan, dtype)
-    return WeldFeature(
-        found=found,
-        centre=jnp.where(found, centre, nan),
-        position=jnp.where(found, pos, nan),
-        width=jnp.where(found, width, nan),
-        height=jnp.where(found, height, nan),
-        confidence=confidence.astype(dtype),
-        noise_mm=sigma,
-    )
+    return _feature(found, centre, pos, width, height, confidence, sigma, dtype)
 
 
 @jax.jit
