@@ -350,7 +350,13 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
     if SMOOTH_PATH:
         scatter = _path_scatter(jnp.nan_to_num(pos), valid, 2 * PATH_HALF_WINDOW)
-        smoothed, factor = smooth_path(jnp.nan_to_num(pos), valid, scatter)
+        # Within 2 SIGMA_ALONG of the image border the smoothing along the stripe mirrors
+        # the image (a tilted stripe bends towards the border's normal there): those
+        # centres take the value of the fit through the interior ones.
+        j = jnp.arange(pos.shape[0])
+        edge = int(round(1.5 * SIGMA_ALONG))
+        inside = (j >= edge) & (j < pos.shape[0] - edge)
+        smoothed, factor = smooth_path(jnp.nan_to_num(pos), valid, scatter, support=inside)
         pos = jnp.where(valid, smoothed, pos)
         sig = jnp.where(valid, sig * factor, sig)
     near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, f.shape[0] - 1)
