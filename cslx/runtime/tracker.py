@@ -42,6 +42,15 @@ filter over s = (e, θ):
   centres). Without odometry a rotation of the robot is otherwise seen only as an offset
   change of x_ref·δ (150 mm lever), which the filter cannot tell from a heading.
 
+- heading from the recent path (`heading_window_mm`, default 60 mm): the accepted bead
+  centres of the last 60 mm of travel, carried into the current robot frame by odometry,
+  lie on the weld line; a robust (Tukey-biweight) line through them, weighted by confidence
+  and by how far each bead's width departs from their median width (a bead whose flank a
+  glint hides is narrow or wide and off-centre), gives θ with its standard deviation, fused
+  as a heading measurement each frame. A straight weld has no lag this way (odometry, not
+  the filter's random walk, carries the past); the window is forgotten when the filter
+  restarts. Numbers in `KalmanConfig`.
+
 Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
 
 Confidence ∈ [0, 1]: the bead detector's confidence (square-rooted: the product of four
@@ -57,7 +66,12 @@ Junction: the pipeline flags a crossing bead on the vertical stripe at x_r = x_j
 sighting counts if that bead is at least `junction_min_height_mm` high, and the tracker
 reports it once two sightings within `junction_window` frames agree within
 `junction_tol_mm` after moving the older one by odometry (x_j −= d), which suppresses
-single-frame false alarms.
+single-frame false alarms; it then holds the junction through up to `junction_hold` frames
+without a sighting, and a farther confirmed junction replaces a nearer one
+(`cslx.runtime.junction_track.JunctionTrack`).
+
+The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
+`cslx.runtime.line_filter`.
 """
 
 from __future__ import annotations
@@ -73,7 +87,8 @@ from typing import Any
 import numpy as np
 
 from ..config import MOTION
-from .line_filter import KalmanConfig, WeldLineFilter
+from .junction_track import JunctionTrack
+from .line_filter import KalmanConfig, WeldLineFilter, robust_line
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -308,9 +323,46 @@ class Tracker:
         self.frame = 0
         self._t = 0.0
         self._confidence = 0.0
-        self._sightings: list[tuple[int, float]] = []  # (frame, x_j moved to now)
+        c = self.kalman
+        self._junctions = JunctionTrack(c.junction_window, c.junction_tol_mm, c.junction_hold)
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
+        self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
+        self._restarts = 0
+
+    def _carry_history(self, d: float, delta: float) -> None:
+        if not len(self._hist):
+            return
+        x, y = self._hist[:, 0] - d, self._hist[:, 1]
+        c, s = math.cos(delta), math.sin(delta)
+        self._hist = np.stack([c * x + s * y, -s * x + c * y, *self._hist[:, 2:].T], 1)
+        keep = self._hist[:, 0] >= self.x_ref - self.kalman.heading_window_mm
+        self._hist = self._hist[keep]
+
+    def _window_heading(self, raw: dict, accepted: bool, conf: float) -> None:
+        """Fuse the heading of a robust line through the recent bead centres (KalmanConfig)."""
+        c, kf = self.kalman, self.filter
+        if kf.restarts != self._restarts:  # a new weld or a re-acquisition: forget the old
+            self._restarts = kf.restarts
+            self._hist = np.zeros((0, 4))
+        if accepted:
+            row = np.array([[raw["h_x_mm"], raw["h_y_mm"], max(conf, 0.05), raw["h_width_mm"]]])
+            self._hist = np.concatenate([self._hist, row])
+        h = self._hist
+        raw["window_heading_deg"] = raw["window_heading_sd_deg"] = NAN
+        if c.heading_window_mm <= 0 or len(h) < 6 or np.ptp(h[:, 0]) < c.heading_min_span_mm:
+            return
+        w = h[:, 2]
+        if c.heading_width_tol > 0:
+            m = np.median(h[:, 3])
+            w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
+        _, th, sd = robust_line(
+            h[:, 0], h[:, 1], w, self.x_ref, c.heading_scale_floor_mm, c.heading_tukey_c
+        )
+        if not math.isfinite(th):
+            return
+        raw["window_heading_deg"], raw["window_heading_sd_deg"] = math.degrees(th), math.degrees(sd)
+        kf.update_heading(th, sd)
 
     def _width_factor(self, width: float) -> float:
         """Weight of a bead whose width departs from the recent accepted ones (docstring)."""
@@ -366,7 +418,8 @@ class Tracker:
         d, delta = self._motion(dt, odometry)
         if index > 0:
             self.filter.predict(d, delta)
-            self._sightings = [(f, x - d) for f, x in self._sightings]
+            self._carry_history(d, delta)
+            self._junctions.move(d)
         try:
             why = self._check(frame)
             if why is None:
@@ -419,6 +472,7 @@ class Tracker:
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
             if accepted:
                 self._widths.append(raw["h_width_mm"])
+            self._window_heading(raw, accepted, conf)
             obs.bead_width_mm, obs.bead_height_mm = raw["h_width_mm"], raw["h_height_mm"]
             if accepted and self.kalman.use_vertical_heading:
                 th, sd = heading_from_vertical(
@@ -452,18 +506,16 @@ class Tracker:
             if math.degrees(sd_th) < c.heading_valid_deg:
                 obs.heading_deg = math.degrees(kf.x[1])
             obs.confidence = float(np.clip(self._confidence / (1.0 + (sd_e / 2.0) ** 2), 0.0, 1.0))
-        self._junction(obs, raw)
+        self._junction(obs, raw, np.asarray(points_v))
         return obs
 
-    def _junction(self, obs: Observation, raw: dict) -> None:
+    def _junction(self, obs: Observation, raw: dict, points_v: np.ndarray) -> None:
         c = self.kalman
-        now = obs.frame
-        self._sightings = [(f, x) for f, x in self._sightings if now - f <= c.junction_window]
         tall = raw["v_height_mm"] >= c.junction_min_height_mm
-        if raw["junction"] > 0.5 and tall and math.isfinite(raw["v_x_mm"]):
-            x = raw["v_x_mm"]
-            agree = [xo for _, xo in self._sightings if abs(xo - x) <= c.junction_tol_mm]
-            self._sightings.append((now, x))
-            if agree:
-                obs.junction = True
-                obs.junction_x_mm = float(np.mean([*agree, x]))
+        x = raw["v_x_mm"] if raw["junction"] > 0.5 and tall else None
+        xs = points_v[:, 0][np.isfinite(points_v[:, 0])] if points_v.ndim == 2 else points_v[:0]
+        extent = (float(xs.min()), float(xs.max())) if xs.size else None
+        xj = self._junctions.update(obs.frame, x, extent)
+        if math.isfinite(xj):
+            obs.junction = True
+            obs.junction_x_mm = xj
