@@ -324,7 +324,9 @@ class Tracker:
         self._t = 0.0
         self._confidence = 0.0
         c = self.kalman
-        self._junctions = JunctionTrack(c.junction_window, c.junction_tol_mm, c.junction_hold)
+        self._junctions = JunctionTrack(
+            c.junction_window, c.junction_tol_mm, c.junction_hold, c.junction_unseen_mm
+        )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
         self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
