@@ -20,7 +20,7 @@ rule; the paper gives none):
   the stripe has seen its place from the far edge of the view on. A new junction whose place
   was inside the view (`margin_mm` from either end of the stripe's measured extent) for more
   than `unseen_mm` of travel before its first sighting is an artefact that appeared
-  mid-view (the sunny flank bumps above: 27 mm unseen; the bar itself ≤ 11 mm on the
+  mid-view (the flank bumps above, sun and glare: 24–27 mm unseen; the bar ≤ 10.5 mm on the
   dev seeds, missed where it first enters the view).
 """
 
