@@ -77,7 +77,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .ridges import LinkParams, linked_centres
+from .path import smooth_path
+from .ridges import PATH_HALF_WINDOW, LinkParams, _path_scatter, linked_centres
 from .steger import Centres
 
 __all__ = [
@@ -110,6 +111,8 @@ SIGMA_PER_WIDTH = 1.0
 #: Smoothing along the stripe (px) of the column-profile candidates.
 SIGMA_ALONG = 6.0
 SIGMA_MAX = 6.0
+#: Smooth the linked path with adaptive local quadratics (`cslx.segmentation.path`).
+SMOOTH_PATH = True
 
 
 def clipped_mask(image, clip_level: float = CLIP_LEVEL):
@@ -303,10 +306,16 @@ def linked_extract(
 
 @functools.partial(jax.jit, static_argnames=("axis",))
 def _finish(pos, valid, sigma, filled, blind, *, axis: int):
-    """Bridging (`_bridge`) and the `saturated` flags, in one compiled call."""
+    """Path smoothing (`cslx.segmentation.path`), bridging (`_bridge`) and the `saturated`
+    flags, in one compiled call."""
     f = filled if axis == 0 else filled.T
     b = blind if axis == 0 else blind.T
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
+    if SMOOTH_PATH:
+        scatter = _path_scatter(jnp.nan_to_num(pos), valid, 2 * PATH_HALF_WINDOW)
+        smoothed, factor = smooth_path(jnp.nan_to_num(pos), valid, scatter)
+        pos = jnp.where(valid, smoothed, pos)
+        sig = jnp.where(valid, sig * factor, sig)
     near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, f.shape[0] - 1)
     sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
     return pos, valid, sig, sat
