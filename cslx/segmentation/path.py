@@ -34,7 +34,8 @@ correction of the curvature bias of the smoothing along the stripe (c''σ²/2 fr
 made every figure slightly worse. The p95 is left at the bead's corners, where the 6 px
 smoothing along the stripe has already rounded the profile before the path is formed.
 
-Pure JAX (`jnp.convolve` moments, closed-form 3×3 inverse), jit- and vmap-able.
+Pure JAX (the moments of all windows in one grouped correlation, closed-form 3×3 inverse),
+jit- and vmap-able; ≈ 1 ms per path on the development CPU.
 """
 
 from __future__ import annotations
@@ -53,22 +54,43 @@ GAMMA = 2.0
 CORRELATION = 4.0
 
 
-def _moment(x, h: int, power: int):
-    """Σ_{m=−h..h} x[j+m] (m/h)^power (zero padded), in the window's own coordinates."""
-    m = np.arange(-h, h + 1, dtype=float) / h
-    kernel = (m**power)[::-1]  # convolution flips the kernel
-    full = jnp.convolve(x, jnp.asarray(kernel, x.dtype), mode="full")  # ("same" would
-    return full[h : h + x.shape[0]]  # return the kernel's length for a kernel longer than x)
+def _kernels(halves) -> np.ndarray:
+    """(2·P, 1, 2·h_max + 1) correlation kernels (m/h)^p on |m| ≤ h: first the five powers
+    0–4 of every window (applied to the weights), then the powers 0–2 (to weights × values),
+    padded with zero kernels to P = 5 per window each."""
+    r = max(halves)
+    m = np.arange(-r, r + 1, dtype=float)
+    first, second = [], []
+    for h in halves:
+        inside = np.abs(m) <= h
+        first += [np.where(inside, (m / h) ** p, 0.0) for p in range(5)]
+        second += [np.where(inside, (m / h) ** p, 0.0) for p in range(3)]
+    second += [np.zeros_like(m)] * (len(first) - len(second))
+    return np.stack(first + second)[:, None, :]
 
 
-def _window_fits(pos, valid, h: int):
-    """Value at each centre of the local quadratic over ±h and its white-noise variance factor
-    (M⁻¹)₀₀: (estimate, factor), NaN / inf where the window holds too few valid centres."""
+def _moments(w, wy, halves):
+    """Σ_{m=−h..h} x[j+m] (m/h)^p (zero padded) of x = w (p ≤ 4) and x = w·y (p ≤ 2) for
+    every window, in the windows' own coordinates: one grouped correlation. Returns
+    ((H, 5, N), (H, 3, N))."""
+    r, n_h = max(halves), len(halves)
+    kernel = jnp.asarray(_kernels(halves), w.dtype)
+    x = jnp.stack([w, wy])[None]  # (1, 2, N)
+    out = lax.conv_general_dilated(x, kernel, (1,), [(r, r)], feature_group_count=2)[0]
+    s = out[: 5 * n_h].reshape(n_h, 5, -1)
+    t = out[5 * n_h : 8 * n_h].reshape(n_h, 3, -1)
+    return s, t
+
+
+def _window_fits(pos, valid, halves):
+    """Value at each centre of the local quadratic over ±h (every h of `halves`) and its
+    white-noise variance factor (M⁻¹)₀₀: (estimate, factor), each (H, N), NaN / inf where
+    the window holds too few valid centres."""
     w = valid.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
-    s0, s1, s2, s3, s4 = (_moment(w, h, p) for p in range(5))
+    (s0, s1, s2, s3, s4), t = (jnp.moveaxis(a, 1, 0) for a in _moments(w, w * y, halves))
     # Σ w (y_{j+m} − y_j) (m/h)^p: the fit relative to the centre's own value (float32-safe).
-    t0, t1, t2 = (_moment(w * y, h, p) - y * s for p, s in enumerate((s0, s1, s2)))
+    t0, t1, t2 = t[0] - y * s0, t[1] - y * s1, t[2] - y * s2
     c00 = s2 * s4 - s3 * s3
     c01 = s2 * s3 - s1 * s4
     c02 = s1 * s3 - s2 * s2
@@ -94,9 +116,8 @@ def smooth_path(pos, valid, scatter, *, gamma=GAMMA, correlation=CORRELATION, ha
         one centre's, √min(c (M⁻¹)₀₀, 1) (1 where nothing was averaged); invalid centres are
         returned as they were.
     """
-    fits = [_window_fits(pos, valid, h) for h in halves]
-    est = jnp.stack([f[0] for f in fits])  # (H, N)
-    factor = jnp.sqrt(jnp.minimum(correlation * jnp.stack([f[1] for f in fits]), 1.0))
+    est, var = _window_fits(pos, valid, halves)  # (H, N)
+    factor = jnp.sqrt(jnp.minimum(correlation * var, 1.0))
     good = jnp.isfinite(est)
     sd = lax.stop_gradient(scatter) * factor
     lo = lax.cummax(jnp.where(good, est - gamma * sd, -jnp.inf), axis=0)

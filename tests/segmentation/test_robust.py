@@ -107,3 +107,37 @@ def test_moment_grid_scores_equal_the_direct_search():
     _, direct = search_space(rgb, axis=0)
     moments = _grid_scores(rgb, CANDIDATES)
     np.testing.assert_allclose(np.asarray(moments), np.asarray(direct), rtol=1e-6, atol=1e-6)
+
+
+def _printed_rgb(rng, shift=1.0):
+    """A thin red vertical stripe running `shift` px beside the vertical edges of a printed
+    chequer (24 px squares, reflectance 0.07 / 1): (8-bit RGB frame, true column)."""
+    h, w = 160, 200
+    vv, uu = np.mgrid[0:h, 0:w]
+    refl = np.where(((uu // 24) + (vv // 24)) % 2 == 0, 1.0, 0.07)
+    u_true = 96.0 + shift  # the chequer's vertical edges lie at multiples of 24 px
+    laser = 90.0 * np.exp(-0.5 * ((uu - u_true) / 1.0) ** 2)
+    rgb = np.stack([110 * refl + laser * refl, 110 * refl, 110 * refl], -1)
+    rgb = rgb + rng.normal(0, 1.5, rgb.shape)
+    return np.clip(rgb, 0, 255).round(), u_true
+
+
+def test_printed_target_divided_by_reflectance():
+    from cslx.segmentation.robust import _reflectance_normalised
+
+    rng = np.random.default_rng(12)
+    rgb, u_true = _printed_rgb(rng)
+    img = jnp.asarray(rgb, jnp.float32)
+    mono = img @ jnp.asarray([1.0, -1.0, 0.0])
+    norm = _reflectance_normalised(img, mono)
+    errs = []
+    for m in (mono, norm):
+        c, _ = linked_centres(np.asarray(m), sigma=2.5, axis=1, sigma_along=6.0)
+        e = np.abs(np.asarray(c.pos) - u_true)
+        errs.append(np.nanpercentile(e[10:-10], 90))
+    # The reflectance step beside the stripe pulls its centre towards the white squares.
+    assert errs[0] > 0.1 and errs[1] < 0.5 * errs[0]
+    # A frame without print is left as it is.
+    plain = jnp.asarray(np.full((60, 80, 3), 100.0) + rng.normal(0, 2, (60, 80, 3)), jnp.float32)
+    pm = plain @ jnp.asarray([1.0, -1.0, 0.0])
+    np.testing.assert_array_equal(np.asarray(_reflectance_normalised(plain, pm)), np.asarray(pm))
