@@ -24,7 +24,10 @@ too) takes its bands from a cheap first pass (the brightest sample of every colu
 `_first_pass`) and runs MED from the band filters to convergence there; only when the
 stripes do not fit the bands does it run MED on the full frame. Centres outside the band are
 reported as not found; inside it they agree with full-frame processing
-(tests/runtime/test_pipeline.py).
+(tests/runtime/test_pipeline.py). The bands are cut out of the uint8 RGB frame before the
+colour sum and the clipped-core fill (``band_first``, `cslx.runtime.band_input`; the same
+values as the bands of the converted frame), so a tracking frame never converts the whole
+frame.
 
 Everything is pure JAX on one frame and jit-compiled at `process_frame`; `process_batch`
 vmaps it over frames (under vmap `lax.cond` evaluates both branches: archives should use
@@ -44,10 +47,10 @@ from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.med import default_filter_length, initial_filter, med
 from ..segmentation.med_bands import band_snr_scale, first_peak
-from ..segmentation.robust import clipped_mask, fill_clipped
 from ..segmentation.shard import map_frames, platform_vmap_size
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
+from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
 from .weld import WeldConfig, WeldFeature, weld_features
 
 __all__ = [
@@ -106,6 +109,14 @@ class PipelineConfig(eqx.Module):
         full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
         centres 0.05–0.15 px off the ground truth where "ridge" and Steger on the colour
         image stay within 0.05 px.
+    band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
+        convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
+        `fill_clipped`; equal to the bands of the converted frame). False converts the
+        whole frame first (before issue 13: the two whole-frame `fill_clipped` images cost
+        ≈ 12 ms of a 27 ms tracking frame). first_pass_stride: with ``band_first``, the
+        first pass looks at every k-th column (row) only; its band is the median of those
+        peaks. stats_stride: brightness and saturated share from every k-th row and column
+        (`cslx.runtime.band_input.frame_stats`; 1 = the whole frame).
     weld: the bead detector's settings. The junction threshold is lowered to 0.1 (the
         detector's default is 0.3): on rendered T frames the crossing bead on the vertical
         stripe is found at the right x_r (±0.5 mm) with confidence 0.15–0.25, and no
@@ -137,6 +148,9 @@ class PipelineConfig(eqx.Module):
     roi_symmetric: bool = eqx.field(static=True, default=True)
     med_delay: str = eqx.field(static=True, default="ridge")
     fill_clipped: bool = eqx.field(static=True, default=True)
+    band_first: bool = eqx.field(static=True, default=True)
+    first_pass_stride: int = eqx.field(static=True, default=4)
+    stats_stride: int = eqx.field(static=True, default=4)
     weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
 
     def lengths(self, height: int, width: int) -> tuple[int, int]:
@@ -260,13 +274,11 @@ def _full(I, state: PipelineState, config: PipelineConfig):
     return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new, jnp.zeros((), bool)
 
 
-def _bands(I, state: PipelineState, config: PipelineConfig, max_steps=None):
+def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=None):
     max_steps = config.roi_max_steps if max_steps is None else max_steps
-    I_h, I_v = I if isinstance(I, tuple) else (I, I)
-    height, width = I_h.shape
-    hh, hw = 2 * config.roi_half_h, 2 * config.roi_half_w
-    band_h = lax.dynamic_slice(I_h, (state.row0, jnp.zeros((), jnp.int32)), (hh, width))
-    band_v = lax.dynamic_slice(I_v, (jnp.zeros((), jnp.int32), state.col0), (height, hw))
+    height, width = shape
+    band_h = cut(0, state.row0, 2 * config.roi_half_h)
+    band_v = cut(1, state.col0, 2 * config.roi_half_w)
     med_on, sym = config.use_med and config.roi_med, config.roi_symmetric
     L = config.L_roi
     ch, Wh, sh, kh = _stripe(
@@ -286,28 +298,29 @@ def _bands(I, state: PipelineState, config: PipelineConfig, max_steps=None):
     )
 
 
-def _first_pass(I, state: PipelineState, config: PipelineConfig):
+def _first_pass(peaks_h, peaks_v, shape, state: PipelineState, config: PipelineConfig):
     """Bands from a cheap first pass on a frame without tracking state: (state, fits).
 
-    The brightest sample of every column (row) of the monochrome image is a rough stripe
-    position; the bands are centred on their medians. They are used when nearly all of those
-    positions fall inside (the `_next_bands` rule: 98 %, away from the band edges); stray
-    maxima (the other stripe, a glint) are the few columns left out. Otherwise the frame
-    goes through full-frame MED.
+    The brightest sample of every column (row) of the monochrome image (``peaks_h`` /
+    ``peaks_v``, possibly of every k-th one) is a rough stripe position; the bands are
+    centred on their medians. They are used when nearly all of those positions fall inside
+    (the `_next_bands` rule: 98 %, away from the band edges); stray maxima (the other
+    stripe, a glint) are the few columns left out. Otherwise the frame goes through
+    full-frame MED.
     """
-    height, width = I.shape
+    height, width = shape
     hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
 
     def band(peaks, half, size):
-        centre = jnp.median(peaks.astype(I.dtype))
+        centre = jnp.median(peaks.astype(jnp.float32))
         start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
         lo = jnp.where(start == 0, -1, start + m)
         hi = jnp.where(start == size - 2 * half, size, start + 2 * half - 1 - m)
         inside = jnp.mean((peaks >= lo) & (peaks <= hi))
         return start, inside >= config.first_pass_fraction
 
-    row0, ok_h = band(first_peak(I, 0), hh, height)
-    col0, ok_v = band(first_peak(I, 1), hw, width)
+    row0, ok_h = band(peaks_h, hh, height)
+    col0, ok_v = band(peaks_v, hw, width)
     new = eqx.tree_at(lambda s: (s.row0, s.col0), state, (row0, col0))
     return new, ok_h & ok_v
 
@@ -316,12 +329,29 @@ def _cold(I, state: PipelineState, config: PipelineConfig):
     """A frame without tracking: the bands of `_first_pass` if the stripes fit, else full."""
     if not config.first_pass:
         return _full(I, state, config)
-    banded, fits = _first_pass(I[0] if isinstance(I, tuple) else I, state, config)
+    I0 = I[0] if isinstance(I, tuple) else I
+    banded, fits = _first_pass(first_peak(I0, 0), first_peak(I0, 1), I0.shape, state, config)
     return lax.cond(
         fits,
-        lambda: _bands(I, banded, config, config.max_steps),
+        lambda: _bands(image_cutter(I), I0.shape, banded, config, config.max_steps),
         lambda: _full(I, state, config),
     )
+
+
+def _cold_rgb(rgb, state: PipelineState, config: PipelineConfig, dtype):
+    """`_cold` with ``band_first``: the first pass on every k-th column (row), each filled
+    along its own search axis; the whole frame is converted only when the bands fail."""
+    shape = rgb.shape[:2]
+    k, w, fill = config.first_pass_stride, config.weights, config.fill_clipped
+    full = lambda: _full(frame_input(rgb, w, dtype, fill), state, config)  # noqa: E731
+    if not config.first_pass:
+        return full()
+    zero = jnp.zeros((), jnp.int32)
+    cols = band_image(rgb[:, ::k], zero, shape[0], 0, w, dtype, fill)
+    rows = band_image(rgb[::k], zero, shape[1], 1, w, dtype, fill)
+    banded, fits = _first_pass(first_peak(cols, 0), first_peak(rows, 1), shape, state, config)
+    cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped)
+    return lax.cond(fits, lambda: _bands(cut, shape, banded, config, config.max_steps), full)
 
 
 def _next_bands(ch: Centres, cv: Centres, state, config: PipelineConfig, shape):
@@ -396,24 +426,28 @@ def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: Pipe
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     dtype = state.filter_h.dtype
-    I = colour_sum(rgb, config.weights, dtype)
-    if config.fill_clipped:
-        # clipped pixels hold lower bounds: fill each short run along the stripe's search
-        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
-        clip = clipped_mask(rgb)
-        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
-    if roi and config.roi_enabled(height, width):
+    if roi and config.roi_enabled(height, width) and config.band_first:
+        cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped)
         ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,
-            lambda: _bands(I, state, config),
+            lambda: _bands(cut, (height, width), state, config),
+            lambda: _cold_rgb(rgb, state, config, dtype),
+        )
+    elif roi and config.roi_enabled(height, width):
+        I = frame_input(rgb, config.weights, dtype, config.fill_clipped)
+        ch, cv, steps, kurt, new, used_roi = lax.cond(
+            state.tracking,
+            lambda: _bands(image_cutter(I), (height, width), state, config),
             lambda: _cold(I, state, config),
         )
     else:
+        I = frame_input(rgb, config.weights, dtype, config.fill_clipped)
         ch, cv, steps, kurt, new, used_roi = _full(I, state, config)
     new = _next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
     Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)
     fh, fv, junction = weld_features(Ph, keep_h, Pv, keep_v, config.weld)
+    brightness, saturated = frame_stats(rgb, dtype, config.stats_stride)
     result = FrameResult(
         centres_h=ch,
         centres_v=cv,
@@ -425,27 +459,10 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
         med_steps=steps,
         kurtosis=kurt.astype(dtype),
         used_roi=used_roi,
-        brightness=jnp.mean(rgb.astype(dtype)),
-        saturated=jnp.mean(jnp.any(rgb >= 255, axis=-1).astype(dtype)),
+        brightness=brightness,
+        saturated=saturated,
     )
     return result, new
-
-
-def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"]:
-    """Eq. (8), I = w_r R + w_g G + w_b B, as a channel-weighted sum over the static weights.
-
-    Zero weights are skipped; the same values as ``rgb.astype(dtype) @ w`` (a matrix
-    product over a length-3 axis), which XLA's CPU backend runs ≈ 3× slower
-    (results/bench_speed.md).
-    """
-    out = None
-    for c, w in enumerate(weights):
-        if w == 0:
-            continue
-        term = rgb[..., c].astype(dtype)
-        term = term if w == 1 else (-term if w == -1 else float(w) * term)
-        out = term if out is None else out + term
-    return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
 def _check_frame(sensor: Sensor, rgb) -> None:

@@ -54,6 +54,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .small_ops import masked_median, solve_spd
+
 __all__ = [
     "WeldConfig",
     "WeldFeature",
@@ -164,7 +166,7 @@ def _wls(A, b, w, eps):
     gradients."""
     n = A.shape[-1]
     Aw = A * w[:, None]
-    return jnp.linalg.solve(Aw.T @ A + eps * jnp.eye(n, dtype=A.dtype), Aw.T @ b)
+    return solve_spd(Aw.T @ A + eps * jnp.eye(n, dtype=A.dtype), Aw.T @ b)
 
 
 def _wls_line(s, z, w):
@@ -174,7 +176,7 @@ def _wls_line(s, z, w):
 
 def _masked_median(x, mask):
     # The robust scale is a weighting constant of IRLS: no gradient through the sort.
-    return jnp.nanmedian(jnp.where(mask, jax.lax.stop_gradient(x), jnp.nan))
+    return masked_median(x, mask)
 
 
 def plate_fit(

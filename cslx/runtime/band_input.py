@@ -1,0 +1,137 @@
+"""The pipeline's monochrome input, cut from the RGB frame where it is needed (issue 13).
+
+Tracking mode processes a band of rows around the horizontal stripe and a band of columns
+around the vertical one. Building the whole frame's colour image, its clipped mask and the
+two `fill_clipped` images (one per stripe axis) costs more than the bands' MED and
+detection together (≈ 12 ms of a 27 ms tracking frame on the 2-core CPU, results of
+experiments/bench_speed.py), so the bands are cut from the uint8 RGB frame first and only
+they are converted (`band_image`).
+
+Equality with the full-frame input. `fill_clipped` fills a clipped run of at most
+``max_run`` samples along the search axis from its two unclipped flanks, and leaves runs
+that touch the image border or are longer. A band cut with ``max_run + 1`` samples of
+context on both sides (clamped at the frame border) contains every run that reaches into
+the band together with its flanks, and a run that touches the context's edge is longer than
+``max_run``, so it is left unfilled in the frame too: the band of the filled frame equals the
+filled band exactly (tests/runtime/test_pipeline.py).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array, Float, UInt8
+
+from ..segmentation.robust import MAX_RUN, clipped_mask, fill_clipped
+
+__all__ = [
+    "band_image",
+    "colour_sum",
+    "frame_input",
+    "frame_stats",
+    "image_cutter",
+    "rgb_cutter",
+    "STATS_STRIDE",
+]
+
+#: Every STATS_STRIDE-th row and column enters the frame's brightness and saturated share.
+STATS_STRIDE = 4
+
+
+def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"]:
+    """Eq. (8), I = w_r R + w_g G + w_b B, as a channel-weighted sum over the static weights.
+
+    Zero weights are skipped; the same values as ``rgb.astype(dtype) @ w`` (a matrix
+    product over a length-3 axis), which XLA's CPU backend runs ≈ 3× slower
+    (results/bench_speed.md).
+    """
+    out = None
+    for c, w in enumerate(weights):
+        if w == 0:
+            continue
+        term = rgb[..., c].astype(dtype)
+        term = term if w == 1 else (-term if w == -1 else float(w) * term)
+        out = term if out is None else out + term
+    return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
+
+
+def _monochrome(rgb, weights, dtype, fill: bool, axis: int):
+    I = colour_sum(rgb, weights, dtype)
+    if not fill:
+        return I
+    clip = clipped_mask(rgb)
+    # Most frames have no clipped pixel in the band: skip the fill there (on the CPU
+    # `lax.cond` runs one branch only).
+    return lax.cond(jnp.any(clip), lambda: fill_clipped(I, clip, axis=axis)[0], lambda: I)
+
+
+def band_image(
+    rgb: UInt8[Array, "h w 3"], start, size: int, axis: int, weights, dtype, fill: bool = True
+) -> Float[Array, "a b"]:
+    """Monochrome band of ``size`` samples from ``start`` along ``axis``, clipped runs filled.
+
+    axis 0: rows ``start .. start + size`` (all columns; the horizontal stripe's band, filled
+    down the columns); axis 1: columns (all rows; the vertical stripe's, filled along the
+    rows). Equal to the same band of ``fill_clipped(colour_sum(rgb), clipped_mask(rgb),
+    axis=axis)`` (module notes); ``fill=False`` cuts the colour image only.
+    """
+    n = rgb.shape[axis]
+    start = jnp.asarray(start, jnp.int32)
+    zero = jnp.zeros((), jnp.int32)
+    ctx = MAX_RUN + 1 if fill else 0
+    outer = min(size + 2 * ctx, n)
+    o0 = jnp.clip(start - ctx, 0, n - outer)
+    starts = (o0, zero, zero) if axis == 0 else (zero, o0, zero)
+    shape = list(rgb.shape)
+    shape[axis] = outer
+    sub = lax.dynamic_slice(rgb, starts, shape)
+    I = _monochrome(sub, weights, dtype, fill, axis)
+    if outer == size:
+        return I
+    return lax.dynamic_slice_in_dim(I, start - o0, size, axis=axis)
+
+
+def frame_stats(rgb: UInt8[Array, "h w 3"], dtype, stride: int = STATS_STRIDE):
+    """(mean grey level 0..255, share of pixels with a channel at 255) of a frame.
+
+    Taken on every ``stride``-th row and column: the tracker's frame gates compare them
+    with thresholds (3 grey levels, 50 % clipped), which a 1/16 subsample of 640×480
+    (19 200 pixels) resolves; the full frame cost ≈ 1 ms a frame.
+    """
+    sub = rgb[::stride, ::stride]
+    return jnp.mean(sub.astype(dtype)), jnp.mean(jnp.any(sub >= 255, axis=-1).astype(dtype))
+
+
+def frame_input(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
+    """The whole frame's monochrome input: one image, or (filled down the columns, filled
+    along the rows) when ``fill`` (one image per stripe axis)."""
+    I = colour_sum(rgb, weights, dtype)
+    if fill:
+        # clipped pixels hold lower bounds: fill each short run along the stripe's search
+        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
+        clip = clipped_mask(rgb)
+        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
+    return I
+
+
+def image_cutter(I):
+    """``cut(axis, start, size)``: a band of converted whole-frame input (`frame_input`)."""
+    I_h, I_v = I if isinstance(I, tuple) else (I, I)
+    zero = jnp.zeros((), jnp.int32)
+
+    def cut(axis, start, size):
+        if axis == 0:
+            return lax.dynamic_slice(I_h, (start, zero), (size, I_h.shape[1]))
+        return lax.dynamic_slice(I_v, (zero, start), (I_v.shape[0], size))
+
+    return cut
+
+
+def rgb_cutter(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
+    """``cut(axis, start, size)``: a band cut from the RGB frame and converted (`band_image`);
+    the same values as ``image_cutter(frame_input(rgb, ...))``."""
+
+    def cut(axis, start, size):
+        return band_image(rgb, start, size, axis, weights, dtype, fill)
+
+    return cut

@@ -1,0 +1,83 @@
+"""Small fixed-size kernels of the bead fits that XLA's CPU backend runs slowly as library calls.
+
+The weld features (`cslx.runtime.weld`, `cslx.runtime.junction`) solve ≈ 40 tiny normal
+equations (2×2, 3×3) and take ≈ 45 medians of a 480–640-point profile per frame, inside
+IRLS and Gauss–Newton loops. As `jnp.linalg.solve` (a LAPACK call each) and
+`jnp.nanmedian` (a full sort) they cost ≈ 5 ms of a tracking frame; as the elementwise
+kernels here they fuse into the loops (issue 13). Same values to float32 rounding
+(tests/runtime/test_small_ops.py).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array, Bool, Float
+
+__all__ = ["masked_median", "solve_spd"]
+
+
+def solve_spd(M: Float[Array, "n n"], v: Float[Array, " n"]) -> Float[Array, " n"]:
+    """M⁻¹ v for a small symmetric positive definite M (n ≤ 4), unrolled elimination.
+
+    Gaussian elimination without pivoting is stable for SPD matrices; the loops are Python
+    loops over the static size, so the solve is a handful of fused scalar operations.
+    """
+    n = M.shape[-1]
+    A = [[M[i, j] for j in range(n)] for i in range(n)]
+    b = [v[i] for i in range(n)]
+    for k in range(n):
+        for i in range(k + 1, n):
+            f = A[i][k] / A[k][k]
+            for j in range(k + 1, n):
+                A[i][j] = A[i][j] - f * A[k][j]
+            b[i] = b[i] - f * b[k]
+    x = [None] * n
+    for i in reversed(range(n)):
+        s = b[i]
+        for j in range(i + 1, n):
+            s = s - A[i][j] * x[j]
+        x[i] = s / A[i][i]
+    return jnp.stack(x)
+
+
+def _order_key(x: Float[Array, " n"]) -> Array:
+    """uint32 keys whose unsigned order is the float32 order of ``x`` (NaN excluded)."""
+    bits = lax.bitcast_convert_type(x, jnp.uint32)
+    negative = (bits >> 31) == 1
+    return jnp.where(negative, ~bits, bits | jnp.uint32(0x80000000))
+
+
+def _from_key(key: Array) -> Float[Array, " k"]:
+    negative = (key >> 31) == 0
+    bits = jnp.where(negative, ~key, key & jnp.uint32(0x7FFFFFFF))
+    return lax.bitcast_convert_type(bits, jnp.float32)
+
+
+def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array, ""]:
+    """``jnp.nanmedian(jnp.where(mask, x, nan))`` without a sort (float32; others sort).
+
+    The two middle order statistics are found by bisection on the 32-bit keys of the
+    values (32 counting passes over the points, exact), and averaged; NaN when no point is
+    selected. No gradient flows through it (it is a weighting constant of the IRLS loops).
+    """
+    x = lax.stop_gradient(x)
+    if x.dtype != jnp.float32:  # the keys are 32-bit: other dtypes take the sort
+        return jnp.nanmedian(jnp.where(mask, x, jnp.nan))
+    keep = mask & ~jnp.isnan(x)
+    k = jnp.sum(keep.astype(jnp.int32))
+    key = jnp.where(keep, _order_key(x), jnp.uint32(0xFFFFFFFF))
+    rank = jnp.stack([jnp.maximum((k - 1) // 2, 0), k // 2])
+
+    def step(_, bounds):
+        lo, hi = bounds
+        mid = lo + (hi - lo) // 2
+        count = jnp.sum((key[None, :] <= mid[:, None]).astype(jnp.int32), axis=1)
+        ok = count > rank
+        return jnp.where(ok, lo, mid + 1), jnp.where(ok, mid, hi)
+
+    lo = jnp.zeros(2, jnp.uint32)
+    hi = jnp.full(2, 0xFFFFFFFF, jnp.uint32)
+    _, hi = lax.fori_loop(0, 32, step, (lo, hi))
+    mid2 = _from_key(hi)
+    return jnp.where(k > 0, 0.5 * (mid2[0] + mid2[1]), jnp.nan)

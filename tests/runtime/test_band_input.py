@@ -1,0 +1,84 @@
+"""Bands cut from the RGB frame first (issue 13) equal the bands of the converted frame."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cslx.runtime.band_input import band_image, frame_input, frame_stats, image_cutter, rgb_cutter
+from cslx.runtime.pipeline import PipelineConfig, _bands, init_state
+from cslx.segmentation.robust import MAX_RUN
+
+W = (1.0, -1.0, 0.0)
+
+
+def _clipped_frame(seed, h=120, w=96):
+    """Random frame with clipped runs of every length (some longer than MAX_RUN) everywhere,
+    so that runs cross every band edge and the frame border."""
+    rng = np.random.default_rng(seed)
+    rgb = rng.integers(0, 200, (h, w, 3), dtype=np.uint8)
+    for _ in range(60):
+        r, c, n = rng.integers(0, h), rng.integers(0, w), rng.integers(1, MAX_RUN + 8)
+        if rng.random() < 0.5:
+            rgb[r : r + n, c, rng.integers(0, 3)] = 255
+        else:
+            rgb[r, c : c + n, rng.integers(0, 3)] = 255
+    return jnp.asarray(rgb)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_band_image_equals_band_of_filled_frame(seed):
+    rgb = _clipped_frame(seed)
+    I_h, I_v = frame_input(rgb, W, jnp.float32)
+    # the fill changed something, or the test would not test it
+    assert not np.array_equal(np.asarray(I_h), np.asarray(I_v))
+    cut = jax.jit(band_image, static_argnums=(2, 3, 4, 5, 6))
+    for axis, ref, size in ((0, I_h, 16), (1, I_v, 24)):
+        n = rgb.shape[axis]
+        for start in (0, 1, 7, 30, n // 2, n - size - 1, n - size):
+            got = np.asarray(cut(rgb, start, size, axis, W, jnp.float32, True))
+            want = np.asarray(jax.lax.dynamic_slice_in_dim(ref, start, size, axis))
+            np.testing.assert_array_equal(got, want)
+    # without the fill: the colour image's band
+    plain = np.asarray(cut(rgb, 5, 16, 0, W, jnp.float32, False))
+    np.testing.assert_array_equal(plain, np.asarray(frame_input(rgb, W, jnp.float32, False))[5:21])
+
+
+def test_bands_from_rgb_equal_bands_of_converted_frame():
+    """The tracking branch of the pipeline: MED + Steger on bands cut from the RGB frame
+    give the centres and filters of the bands of the whole converted frame."""
+    rgb = _clipped_frame(3, 240, 320)
+    # a bright stripe in each direction so that MED and Steger have something to find
+    rgb = np.asarray(rgb).copy()
+    rgb[118:123, :, 0] = 250
+    rgb[:, 200:205, 0] = 250
+    rgb = jnp.asarray(rgb)
+    config = PipelineConfig(roi_half_h=16, roi_half_w=24)
+    state = init_state(config, (320, 240))
+    state = state.__class__(**{**vars(state), "row0": jnp.int32(104), "col0": jnp.int32(180)})
+    shape = (240, 320)
+
+    @jax.jit
+    def both(rgb, state):
+        new = _bands(rgb_cutter(rgb, W, jnp.float32), shape, state, config)
+        old = _bands(image_cutter(frame_input(rgb, W, jnp.float32)), shape, state, config)
+        return new, old
+
+    new, old = both(rgb, state)
+    # the inputs are equal (above); the programs fuse differently: float32 rounding only
+    for a, b in zip(jax.tree_util.tree_leaves(new), jax.tree_util.tree_leaves(old), strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        if a.dtype.kind == "f":
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-4)
+        else:
+            np.testing.assert_array_equal(a, b)
+    assert np.asarray(new[0].valid).sum() > 200
+
+
+def test_frame_stats_subsample():
+    rgb = _clipped_frame(2)
+    full = frame_stats(rgb, jnp.float32, 1)
+    assert float(full[0]) == pytest.approx(float(np.mean(np.asarray(rgb, np.float64))), rel=1e-5)
+    assert float(full[1]) == pytest.approx(float(np.mean(np.any(np.asarray(rgb) >= 255, -1))))
+    sub = frame_stats(rgb, jnp.float32, 4)
+    assert float(sub[0]) == pytest.approx(float(full[0]), rel=0.05)
