@@ -25,8 +25,8 @@ windows' intervals and the window stays short; on a plate it grows to ±96 centr
 Evidence (development seeds 7100–7117, 2 frames × 18 conditions of
 `experiments/robust_extraction.py`, horizontal / vertical, pooled): the linked path alone
 scored median 0.059 / 0.088 mm, p95 0.223 / 0.427 mm, gross 0.00 / 0.24 %; smoothed
-(quadratic, Γ 2, c 4, h up to 96) median 0.040 / 0.051 mm, p95 0.205 / 0.272 mm, gross
-0.00 / 0.07 % (see `cslx.segmentation.robust` for the held-out figures). Local lines instead
+(quadratic, Γ 2, c 4, h up to 96) median 0.041 / 0.051 mm, p95 0.203 / 0.276 mm, gross
+0.00 / 0.06 % (see `cslx.segmentation.robust` for the held-out figures). Local lines instead
 of quadratics: 0.041 / 0.063 mm (lines up to ±64: 0.035 / 0.085 mm — the vertical stripe's
 path is curved by the lens distortion). A shorter smoothing along the stripe (3 / 4 px) with
 this path smoothing lost detection (99.61 / 99.68 % horizontal) for no better median; a
