@@ -42,6 +42,15 @@ filter over s = (e, θ):
   centres). Without odometry a rotation of the robot is otherwise seen only as an offset
   change of x_ref·δ (150 mm lever), which the filter cannot tell from a heading.
 
+- heading from the recent path (`heading_window_mm`, default 60 mm): the accepted bead
+  centres of the last 60 mm of travel, carried into the current robot frame by odometry,
+  lie on the weld line; a robust (Tukey-biweight) line through them, weighted by confidence
+  and by how far each bead's width departs from their median width (a bead whose flank a
+  glint hides is narrow or wide and off-centre), gives θ with its standard deviation, fused
+  as a heading measurement each frame. A straight weld has no lag this way (odometry, not
+  the filter's random walk, carries the past); the window is forgotten when the filter
+  restarts. Numbers in `KalmanConfig`.
+
 Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
 
 Confidence ∈ [0, 1]: the bead detector's confidence (square-rooted: the product of four
@@ -57,7 +66,12 @@ Junction: the pipeline flags a crossing bead on the vertical stripe at x_r = x_j
 sighting counts if that bead is at least `junction_min_height_mm` high, and the tracker
 reports it once two sightings within `junction_window` frames agree within
 `junction_tol_mm` after moving the older one by odometry (x_j −= d), which suppresses
-single-frame false alarms.
+single-frame false alarms; it then holds the junction through up to `junction_hold` frames
+without a sighting, and a farther confirmed junction replaces a nearer one
+(`cslx.runtime.junction_track.JunctionTrack`).
+
+The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
+`cslx.runtime.line_filter`.
 """
 
 from __future__ import annotations
@@ -73,6 +87,8 @@ from typing import Any
 import numpy as np
 
 from ..config import MOTION
+from .junction_track import JunctionTrack
+from .line_filter import KalmanConfig, WeldLineFilter, robust_line
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -96,41 +112,6 @@ NAN = math.nan
 
 #: Values the tracker's compiled step returns after `cslx.runtime.pipeline.SUMMARY_FIELDS`.
 EXTRA_FIELDS = ("v_height_mm", "v_width_mm")
-
-
-@dataclasses.dataclass(frozen=True)
-class KalmanConfig:
-    """Tuning of the weld-line filter (module docstring). mm, rad, frames."""
-
-    q_offset: float = 0.08  # mm per √mm travelled
-    q_heading: float = 0.002  # rad per √mm travelled
-    q_floor: float = 1e-4  # mm², rad² per frame (a robot at rest drifts a little too)
-    sigma_meas: float = 0.35  # mm, at confidence 1
-    init_offset_std: float = 2.0  # mm
-    init_heading_std: float = math.radians(10.0)
-    gate: float = 4.0  # innovation standard deviations
-    reset_after: int = 3  # mutually consistent rejected measurements in a row → restart
-    consistent_mm: float = 1.0  # half their spread (max − min) at x_ref, mm
-    give_up_after: int = 8  # rejected measurements in a row that restart it regardless
-    heading_valid_deg: float = 3.0
-    decay: float = 0.85  # confidence per frame without a bead
-    junction_window: int = 10
-    junction_tol_mm: float = 6.0
-    # A crossing bead lower than this is not a weld: on rendered straight-weld frames the
-    # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation
-    # artefacts) that the detector took for a crossing bead; weld reinforcement is 1–3 mm.
-    junction_min_height_mm: float = 0.8
-    # a bead whose width differs from the median of the last `width_memory` accepted ones by
-    # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
-    # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to
-    # 34 mm for a 14 mm bead at dev seed 1201), and those are the frames whose position is off
-    width_tol: float = 0.2
-    width_memory: int = 20
-    # fuse the heading the vertical stripe sees (`weld.heading_from_vertical`). Off: along the
-    # bead's flank (dev seed 1201, odometry) the heading error went 0.51° → 1.34° (clean),
-    # 0.60° → 1.70° (sun); beside the weld it never sees the weld's direction
-    use_vertical_heading: bool = False
-    sigma_heading_floor_deg: float = 0.3  # its standard deviation at least this
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,102 +202,6 @@ class Observation:
         for k in (*keys, "used_roi"):
             row[k] = self.raw.get(k, NAN)
         return row
-
-
-class _WeldLineFilter:
-    """Kalman filter over (offset e mm, heading θ rad); see the module docstring."""
-
-    def __init__(self, config: KalmanConfig, x_ref: float):
-        self.c = config
-        self.x_ref = x_ref
-        self.reset()
-
-    def reset(self) -> None:
-        self.x: np.ndarray | None = None
-        self.P = np.zeros((2, 2))
-        self.rejected = 0
-        self.restarts = 0
-        self.pending: list[np.ndarray] = []  # rejected centres (x_r, y_r), current frame
-
-    @staticmethod
-    def _carry(p: np.ndarray, d: float, delta: float) -> np.ndarray:
-        """A wall point (x_r, y_r) seen from the robot after it moved d mm and turned δ."""
-        x, y = p[0] - d, p[1]
-        c, s = np.cos(delta), np.sin(delta)
-        return np.array([c * x + s * y, -s * x + c * y])
-
-    @property
-    def initialised(self) -> bool:
-        return self.x is not None
-
-    def predict(self, d: float, delta: float) -> None:
-        self.pending = [self._carry(p, d, delta) for p in self.pending]
-        if self.x is None:
-            return
-        c = self.c
-        F = np.array([[1.0, d], [0.0, 1.0]])
-        self.x = F @ self.x + np.array([-self.x_ref * delta, -delta])
-        Q = np.diag([c.q_offset**2, c.q_heading**2]) * abs(d) + c.q_floor * np.eye(2)
-        self.P = F @ self.P @ F.T + Q
-
-    def start(self, y: float, theta: float = 0.0) -> None:
-        c = self.c
-        self.x = np.array([y, theta])
-        self.P = np.diag([c.init_offset_std**2, c.init_heading_std**2])
-        self.rejected = 0
-        self.pending = []
-
-    def _reacquire(self) -> bool:
-        """Restart at the rejected centres if the last `reset_after` agree (docstring)."""
-        c = self.c
-        recent = np.array(self.pending[-c.reset_after :])
-        theta = float(self.x[1]) if self.x is not None else 0.0
-        at_ref = recent[:, 1] - np.tan(theta) * (recent[:, 0] - self.x_ref)
-        agree = len(recent) >= c.reset_after and np.ptp(at_ref) <= 2.0 * c.consistent_mm
-        if agree or self.rejected >= c.give_up_after:
-            y = float(np.mean(at_ref)) if agree else float(at_ref[-1])
-            self.start(y, theta)
-            self.restarts += 1
-            return True
-        return False
-
-    def update_heading(self, theta: float, sd: float) -> bool:
-        """Fuse a direct heading measurement (rad, its standard deviation rad); gated."""
-        if self.x is None:
-            return False
-        R = max(sd, np.radians(self.c.sigma_heading_floor_deg)) ** 2
-        H = np.array([0.0, 1.0])
-        S = self.P[1, 1] + R
-        nu = theta - self.x[1]
-        if nu * nu > self.c.gate**2 * S:
-            return False
-        K = self.P @ H / S
-        self.x = self.x + K * nu
-        self.P = (np.eye(2) - np.outer(K, H)) @ self.P
-        self.P = 0.5 * (self.P + self.P.T)
-        return True
-
-    def update(self, x_c: float, y_c: float, confidence: float) -> bool:
-        """Fuse one bead centre; False if gated out (the filter may restart)."""
-        c = self.c
-        if self.x is None:
-            self.start(y_c)
-            return True
-        H = np.array([1.0, x_c - self.x_ref])
-        R = c.sigma_meas**2 / max(confidence, 0.05)
-        S = H @ self.P @ H + R
-        nu = y_c - H @ self.x
-        if nu * nu > c.gate**2 * S:
-            self.rejected += 1
-            self.pending.append(np.array([x_c, y_c], float))
-            return self._reacquire()
-        K = self.P @ H / S
-        self.x = self.x + K * nu
-        self.P = (np.eye(2) - np.outer(K, H)) @ self.P
-        self.P = 0.5 * (self.P + self.P.T)
-        self.rejected = 0
-        self.pending = []
-        return True
 
 
 def tracking_config():
@@ -434,13 +319,52 @@ class Tracker:
     def reset(self) -> None:
         """Forget everything learnt from past frames (state, filter, junction sightings)."""
         self._state = self._state0
-        self.filter = _WeldLineFilter(self.kalman, self.x_ref)
+        self.filter = WeldLineFilter(self.kalman, self.x_ref)
         self.frame = 0
         self._t = 0.0
         self._confidence = 0.0
-        self._sightings: list[tuple[int, float]] = []  # (frame, x_j moved to now)
+        c = self.kalman
+        self._junctions = JunctionTrack(
+            c.junction_window, c.junction_tol_mm, c.junction_hold, c.junction_unseen_mm
+        )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
+        self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
+        self._restarts = 0
+
+    def _carry_history(self, d: float, delta: float) -> None:
+        if not len(self._hist):
+            return
+        x, y = self._hist[:, 0] - d, self._hist[:, 1]
+        c, s = math.cos(delta), math.sin(delta)
+        self._hist = np.stack([c * x + s * y, -s * x + c * y, *self._hist[:, 2:].T], 1)
+        keep = self._hist[:, 0] >= self.x_ref - self.kalman.heading_window_mm
+        self._hist = self._hist[keep]
+
+    def _window_heading(self, raw: dict, accepted: bool, conf: float) -> None:
+        """Fuse the heading of a robust line through the recent bead centres (KalmanConfig)."""
+        c, kf = self.kalman, self.filter
+        if kf.restarts != self._restarts:  # a new weld or a re-acquisition: forget the old
+            self._restarts = kf.restarts
+            self._hist = np.zeros((0, 4))
+        if accepted:
+            row = np.array([[raw["h_x_mm"], raw["h_y_mm"], max(conf, 0.05), raw["h_width_mm"]]])
+            self._hist = np.concatenate([self._hist, row])
+        h = self._hist
+        raw["window_heading_deg"] = raw["window_heading_sd_deg"] = NAN
+        if c.heading_window_mm <= 0 or len(h) < 6 or np.ptp(h[:, 0]) < c.heading_min_span_mm:
+            return
+        w = h[:, 2]
+        if c.heading_width_tol > 0:
+            m = np.median(h[:, 3])
+            w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
+        _, th, sd = robust_line(
+            h[:, 0], h[:, 1], w, self.x_ref, c.heading_scale_floor_mm, c.heading_tukey_c
+        )
+        if not math.isfinite(th):
+            return
+        raw["window_heading_deg"], raw["window_heading_sd_deg"] = math.degrees(th), math.degrees(sd)
+        kf.update_heading(th, sd)
 
     def _width_factor(self, width: float) -> float:
         """Weight of a bead whose width departs from the recent accepted ones (docstring)."""
@@ -496,7 +420,8 @@ class Tracker:
         d, delta = self._motion(dt, odometry)
         if index > 0:
             self.filter.predict(d, delta)
-            self._sightings = [(f, x - d) for f, x in self._sightings]
+            self._carry_history(d, delta)
+            self._junctions.move(d)
         try:
             why = self._check(frame)
             if why is None:
@@ -549,6 +474,7 @@ class Tracker:
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
             if accepted:
                 self._widths.append(raw["h_width_mm"])
+            self._window_heading(raw, accepted, conf)
             obs.bead_width_mm, obs.bead_height_mm = raw["h_width_mm"], raw["h_height_mm"]
             if accepted and self.kalman.use_vertical_heading:
                 th, sd = heading_from_vertical(
@@ -582,18 +508,16 @@ class Tracker:
             if math.degrees(sd_th) < c.heading_valid_deg:
                 obs.heading_deg = math.degrees(kf.x[1])
             obs.confidence = float(np.clip(self._confidence / (1.0 + (sd_e / 2.0) ** 2), 0.0, 1.0))
-        self._junction(obs, raw)
+        self._junction(obs, raw, np.asarray(points_v))
         return obs
 
-    def _junction(self, obs: Observation, raw: dict) -> None:
+    def _junction(self, obs: Observation, raw: dict, points_v: np.ndarray) -> None:
         c = self.kalman
-        now = obs.frame
-        self._sightings = [(f, x) for f, x in self._sightings if now - f <= c.junction_window]
         tall = raw["v_height_mm"] >= c.junction_min_height_mm
-        if raw["junction"] > 0.5 and tall and math.isfinite(raw["v_x_mm"]):
-            x = raw["v_x_mm"]
-            agree = [xo for _, xo in self._sightings if abs(xo - x) <= c.junction_tol_mm]
-            self._sightings.append((now, x))
-            if agree:
-                obs.junction = True
-                obs.junction_x_mm = float(np.mean([*agree, x]))
+        x = raw["v_x_mm"] if raw["junction"] > 0.5 and tall else None
+        xs = points_v[:, 0][np.isfinite(points_v[:, 0])] if points_v.ndim == 2 else points_v[:0]
+        extent = (float(xs.min()), float(xs.max())) if xs.size else None
+        xj = self._junctions.update(obs.frame, x, extent)
+        if math.isfinite(xj):
+            obs.junction = True
+            obs.junction_x_mm = xj

@@ -109,7 +109,10 @@ def run_closed_loop(
         start_offset_mm, start_heading_deg: initial lateral / heading error of the robot.
         turn_rate: the controller's turning rate at the T, rad/s.
         settle_s: the "steady" statistics leave out the first settle_s seconds (the
-            controller's response to the initial error).
+            controller's response to the initial error): `steady_*` over the rest of the
+            run, `stem_steady_*` over the rest of the stem only; `after_turn_*` cover
+            every counted frame on the crossing weld, the re-acquisition after the turn
+            included (nothing of the turn's transient is left out there).
         after_turn_frames: end the run this many frames after the turn was completed
             (None: run all `n_frames`).
         tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.
@@ -215,6 +218,10 @@ def run_closed_loop(
                     break
     counted = [r for r in rows if r["counted"]]
     steady = np.array([r["tracking_error_mm"] for r in counted if r["t_s"] >= settle_s])
+    stem = np.array(
+        [r["tracking_error_mm"] for r in counted if r["t_s"] >= settle_s and r["followed"] == 0]
+    )
+    bar = np.array([r["tracking_error_mm"] for r in counted if r["followed"] == 1])
     err = np.array([r["tracking_error_mm"] for r in counted])
     est = np.array([r["estimation_error_mm"] for r in counted])
     est = est[np.isfinite(est)]
@@ -237,6 +244,10 @@ def run_closed_loop(
         n_steady=int(steady.size),
         steady_mean_error_mm=float(steady.mean()) if steady.size else nan,
         steady_max_error_mm=float(steady.max()) if steady.size else nan,
+        stem_steady_mean_error_mm=float(stem.mean()) if stem.size else nan,
+        stem_steady_max_error_mm=float(stem.max()) if stem.size else nan,
+        after_turn_mean_error_mm=float(bar.mean()) if bar.size else nan,
+        after_turn_max_error_mm=float(bar.max()) if bar.size else nan,
         mean_abs_estimation_error_mm=float(np.abs(est).mean()) if est.size else nan,
         max_abs_estimation_error_mm=float(np.abs(est).max()) if est.size else nan,
         turns_completed=controller.turns_completed,

@@ -6,7 +6,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from cslx.runtime.tracker import KalmanConfig, Tracker, _WeldLineFilter
+from cslx.runtime.line_filter import KalmanConfig, WeldLineFilter
+from cslx.runtime.tracker import Tracker
 from cslx.sensor import default_sensor
 from cslx.sim import random_pose, random_world, render_frame
 
@@ -89,7 +90,7 @@ def test_kalman_recovers_heading_from_odometry():
     """Bead centres along a line at 3° seen while driving 1.5 mm/frame: heading → 3°."""
     rng = np.random.default_rng(1)
     x_ref, theta, e0 = 150.0, math.radians(3.0), 2.0
-    kf = _WeldLineFilter(KalmanConfig(), x_ref)
+    kf = WeldLineFilter(KalmanConfig(), x_ref)
     travelled = 0.0
     for k in range(80):
         if k:
@@ -124,7 +125,7 @@ def test_gate_reacquires_after_consistent_rejections():
     """A wrong prediction locks the truth out; three agreeing centres restart the filter."""
     rng = np.random.default_rng(4)
     c = KalmanConfig()
-    kf = _WeldLineFilter(c, 150.0)
+    kf = WeldLineFilter(c, 150.0)
     for _ in range(30):  # settled on a weld at y = 0
         kf.predict(1.5, 0.0)
         kf.update(150.0, rng.normal(0, 0.1), 0.8)
@@ -141,7 +142,7 @@ def test_gate_reacquires_after_consistent_rejections():
 def test_gate_does_not_restart_on_disagreeing_clutter():
     rng = np.random.default_rng(5)
     c = KalmanConfig()
-    kf = _WeldLineFilter(c, 150.0)
+    kf = WeldLineFilter(c, 150.0)
     for _ in range(30):
         kf.predict(1.5, 0.0)
         kf.update(150.0, rng.normal(0, 0.1), 0.8)

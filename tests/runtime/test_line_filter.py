@@ -1,0 +1,80 @@
+"""The robust heading line (cslx.runtime.line_filter.robust_line) and the temporal junction
+rule (cslx.runtime.junction_track.JunctionTrack), on synthetic data with known answers."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cslx.runtime.junction_track import JunctionTrack
+from cslx.runtime.line_filter import robust_line
+
+
+def test_robust_line_ignores_biased_centres():
+    """40 centres on a 2° line (0.1 mm noise), 8 of them 1.5–3 mm off (glints) at one end."""
+    rng = np.random.default_rng(7)
+    x = np.linspace(90.0, 150.0, 40)
+    theta, e = math.radians(2.0), 0.7
+    y = e + math.tan(theta) * (x - 150.0) + rng.normal(0, 0.1, x.size)
+    y[:8] += rng.uniform(1.5, 3.0, 8)
+    w = np.full(x.size, 0.5)
+    e_r, th_r, sd = robust_line(x, y, w, 150.0, floor=0.05, c=3.0)
+    b_ls = np.polyfit(x - 150.0, y, 1)[0]
+    assert abs(math.degrees(math.atan(b_ls)) - 2.0) > 1.0  # least squares is pulled off
+    assert math.degrees(th_r) == pytest.approx(2.0, abs=0.15)
+    assert e_r == pytest.approx(e, abs=0.1)
+    assert 0.0 < math.degrees(sd) < 0.3
+
+
+def test_robust_line_needs_spread():
+    x = np.full(10, 150.0)
+    assert all(math.isnan(v) for v in robust_line(x, x * 0, np.ones(10), 150.0, 0.1, 3.0))
+    assert all(math.isnan(v) for v in robust_line(x[:2], x[:2], np.ones(2), 150.0, 0.1, 3.0))
+
+
+def _run(track, xs_world, step=1.5, extent=(96.0, 220.0)):
+    """Feed sightings of plate-fixed features; xs_world[k] is frame k's sighting or None."""
+    out = []
+    for k, s in enumerate(xs_world):
+        if k:
+            track.move(step)
+        out.append(track.update(k, s(k) if callable(s) else s, extent))
+    return out
+
+
+def test_junction_confirmed_on_second_sighting_and_held_through_gaps():
+    bar = lambda k: 212.0 - 1.5 * k  # noqa: E731 — a crossing weld fixed on the plate
+    seen = [bar, bar, None, None, bar, None, None, None, None, None, None, None]
+    out = _run(JunctionTrack(10, 6.0, hold=6), seen)
+    assert math.isnan(out[0])  # one sighting is not a junction
+    for k in (1, 2, 3, 4, 10):
+        assert out[k] == pytest.approx(bar(k), abs=0.01), k
+    assert math.isnan(out[11])  # 7 frames after the last sighting: dropped
+
+
+def test_junction_not_reported_outside_the_view():
+    bar = lambda k: 212.0 - 1.5 * k  # noqa: E731
+    track = JunctionTrack(10, 6.0, hold=6)
+    _run(track, [bar, bar])
+    track.move(1.5)
+    assert math.isnan(track.update(2, None, (100.0, 150.0)))  # the stripe ends before it
+
+
+def test_farther_junction_replaces_a_nearer_one():
+    near = lambda k: 170.0 - 1.5 * k  # noqa: E731
+    far = lambda k: 214.0 - 1.5 * k  # noqa: E731
+    out = _run(JunctionTrack(10, 6.0, hold=6), [near, near, far, far, near, None])
+    assert out[1] == pytest.approx(near(1))
+    assert out[3] == pytest.approx(far(3))
+    assert out[5] == pytest.approx(far(5))  # the nearer one does not take it back
+
+
+def test_artefact_appearing_mid_view_is_not_a_junction():
+    """A bump first sighted at 165 mm after its place was in view for 30 mm of travel."""
+    bump = lambda k: 195.0 - 1.5 * k  # noqa: E731 — at 165 mm by frame 20
+    seen = [None] * 20 + [bump, bump, bump]
+    out = _run(JunctionTrack(10, 6.0, hold=6, unseen_mm=20.0), seen)
+    assert all(math.isnan(v) for v in out)
+    # the same sightings with the rule off are reported: the rule is what rejects them
+    out = _run(JunctionTrack(10, 6.0, hold=6), seen)
+    assert out[21] == pytest.approx(bump(21), abs=0.01)
