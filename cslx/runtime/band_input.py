@@ -2,10 +2,11 @@
 
 Tracking mode processes a band of rows around the horizontal stripe and a band of columns
 around the vertical one. Building the whole frame's colour image, its clipped mask and the
-two `fill_clipped` images (one per stripe axis) costs more than the bands' MED and
-detection together (≈ 12 ms of a 27 ms tracking frame on the 2-core CPU, results of
-experiments/bench_speed.py), so the bands are cut from the uint8 RGB frame first and only
-they are converted (`band_image`).
+two `fill_clipped` images (one per stripe axis) cost more than the bands' MED and
+detection together (whole frame 10–12 ms at load 5 on the 2-core CPU; a tracking frame
+took 53.8 ms that way and 35.8 ms band-first in the same run of experiments/bench_speed.py),
+so the bands are cut from the uint8 RGB frame first and only they are converted
+(`band_image`).
 
 Equality with the full-frame input. `fill_clipped` fills a clipped run of at most
 ``max_run`` samples along the search axis from its two unclipped flanks, and leaves runs
