@@ -43,6 +43,7 @@ STEPS = (
     Step("fig21", "fig21_weld_profiles", minutes=2),
     Step("contact_sheet", "contact_sheet", minutes=1),
     Step("robust", "robust_extraction", ("--frames", "2"), minutes=20),
+    Step("flat_wall", "flat_wall", minutes=2),
     Step("table6", "table6_segmentation", ("--frames", "64", "--time-calls", "200"), 25),
     Step("sweep_noise", "sweep_noise", minutes=15),
     Step("table5", "table5_calibration", minutes=15),

@@ -25,8 +25,8 @@ windows' intervals and the window stays short; on a plate it grows to ±96 centr
 Evidence (development seeds 7100–7117, 2 frames × 18 conditions of
 `experiments/robust_extraction.py`, horizontal / vertical, pooled): the linked path alone
 scored median 0.059 / 0.088 mm, p95 0.223 / 0.427 mm, gross 0.00 / 0.24 %; smoothed
-(quadratic, Γ 2, c 4, h up to 96) median 0.040 / 0.051 mm, p95 0.205 / 0.272 mm, gross
-0.00 / 0.07 % (see `cslx.segmentation.robust` for the held-out figures). Local lines instead
+(quadratic, Γ 2, c 4, h up to 96) median 0.041 / 0.051 mm, p95 0.203 / 0.276 mm, gross
+0.00 / 0.06 % (see `cslx.segmentation.robust` for the held-out figures). Local lines instead
 of quadratics: 0.041 / 0.063 mm (lines up to ±64: 0.035 / 0.085 mm — the vertical stripe's
 path is curved by the lens distortion). A shorter smoothing along the stripe (3 / 4 px) with
 this path smoothing lost detection (99.61 / 99.68 % horizontal) for no better median; a
@@ -82,11 +82,11 @@ def _moments(w, wy, halves):
     return s, t
 
 
-def _window_fits(pos, valid, halves):
-    """Value at each centre of the local quadratic over ±h (every h of `halves`) and its
-    white-noise variance factor (M⁻¹)₀₀: (estimate, factor), each (H, N), NaN / inf where
-    the window holds too few valid centres."""
-    w = valid.astype(pos.dtype)
+def _window_fits(pos, valid, support, halves):
+    """Value at each valid centre of the local quadratic through the `support` centres within
+    ±h (every h of `halves`) and its white-noise variance factor (M⁻¹)₀₀: (estimate, factor),
+    each (H, N), NaN / inf where the window holds too few support centres."""
+    w = support.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
     (s0, s1, s2, s3, s4), t = (jnp.moveaxis(a, 1, 0) for a in _moments(w, w * y, halves))
     # Σ w (y_{j+m} − y_j) (m/h)^p: the fit relative to the centre's own value (float32-safe).
@@ -101,13 +101,18 @@ def _window_fits(pos, valid, halves):
     return jnp.where(ok, est, jnp.nan), jnp.where(ok, c00 / safe, jnp.inf)
 
 
-def smooth_path(pos, valid, scatter, *, gamma=GAMMA, correlation=CORRELATION, halves=HALVES):
+def smooth_path(
+    pos, valid, scatter, *, support=None, gamma=GAMMA, correlation=CORRELATION, halves=HALVES
+):
     """Local-quadratic path smoothing with per-centre windows by the ICI rule (module docstring).
 
     Args:
         pos: (N,) centres along the search axis (any value where not valid).
         valid: (N,) bool.
         scatter: the path's robust std about its local line (px, scalar).
+        support: (N,) bool, the centres the fits pass through (default `valid`); a valid
+            centre outside it gets the value of the fit through its neighbours (e.g. near
+            the image border, where the smoothing along the stripe is biased).
         gamma, correlation: Γ and c of the module docstring.
         halves: half windows, shortest first (static).
 
@@ -116,17 +121,21 @@ def smooth_path(pos, valid, scatter, *, gamma=GAMMA, correlation=CORRELATION, ha
         one centre's, √min(c (M⁻¹)₀₀, 1) (1 where nothing was averaged); invalid centres are
         returned as they were.
     """
-    est, var = _window_fits(pos, valid, halves)  # (H, N)
-    factor = jnp.sqrt(jnp.minimum(correlation * var, 1.0))
+    support = valid if support is None else support & valid
+    est, var = _window_fits(pos, valid, support, halves)  # (H, N)
+    # One centre's own noise bounds a fit through it; an extrapolation (a centre outside the
+    # support) can be worse than that.
+    factor = jnp.sqrt(jnp.where(support, jnp.minimum(correlation * var, 1.0), correlation * var))
     good = jnp.isfinite(est)
     sd = lax.stop_gradient(scatter) * factor
     lo = lax.cummax(jnp.where(good, est - gamma * sd, -jnp.inf), axis=0)
     hi = lax.cummin(jnp.where(good, est + gamma * sd, jnp.inf), axis=0)
-    # Windows 0..i all usable and their intervals intersecting; keep the longest such run.
-    run = jnp.cumprod((good & (lo <= hi)).astype(jnp.int32), axis=0)
-    n_ok = jnp.sum(run, axis=0)
-    pick = jnp.maximum(n_ok - 1, 0)[None]
+    # The usable windows' intervals up to i intersect; keep the longest usable such window.
+    run = jnp.cumprod((lo <= hi).astype(jnp.int32), axis=0).astype(bool) & good
+    index = jnp.arange(len(halves))[:, None]
+    best = jnp.max(jnp.where(run, index, -1), axis=0)
+    pick = jnp.maximum(best, 0)[None]
     chosen = jnp.take_along_axis(jnp.where(good, est, 0.0), pick, 0)[0]
     f = jnp.take_along_axis(factor, pick, 0)[0]
-    use = valid & (n_ok > 0)
+    use = valid & (best >= 0)
     return jnp.where(use, chosen, pos), jnp.where(use, f, 1.0)

@@ -17,6 +17,8 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    R = G = B = 255 maps to 0) becomes one symmetric bump whose centre is the plateau's middle,
    set by its unclipped flanks. White glints have grey flanks (≈ 0 in a laser-coloured space)
    and stay dark. Centres on a filled run are flagged `saturated`.
+   On a printed target (many sharp reflectance steps in the darkest channel) the monochrome
+   image is first divided by the reflectance (`_reflectance_normalised`).
 3. Column profiles and σ (`cslx.segmentation.ridges`, `sigma_along`): the image is smoothed
    by `SIGMA_ALONG` along the stripe and each column's profile is located by the 1-D Taylor
    step, which measures through the crossing of the other stripe (constant along the
@@ -35,35 +37,39 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    `BRIDGE_SUPPORT` path points on each side (gaps up to `MAX_BRIDGE`), flagged `saturated`,
    with the line's prediction std as `sigma`. Gaps with no clipped pixels (the laser's shadow
    behind a bead, black print) are not bridged.
+6. Path smoothing (`cslx.segmentation.path.smooth_path`): local quadratics along the path
+   with a window per centre by the ICI rule, so plates average many speckle grains and
+   corners stay sharp; within 1.5 `SIGMA_ALONG` of the image border (where the mirrored
+   smoothing along the stripe bends a tilted stripe by up to 1.4 px) the centres take the
+   value of the fit through the interior ones (their `sigma` raised by the extrapolation).
 
 Evidence (`experiments/robust_extraction.py`, 2 frames × 18 conditions — the four presets,
 green and blue lasers, saturated cores with and without sun, a thin stripe on a printed
 target — at held-out seeds 9100–9117; development used 7100–7117). Horizontal / vertical
 stripe, pooled: the linked detector of the first version (2-D Hessian candidates, σ 3.5)
 found 99.20 / 99.22 % of the ground-truth columns / rows with 0.36 / 0.59 % gross (> 1 mm)
-centres, median 0.066 / 0.082 mm, p95 0.277 / 0.385 mm; this version finds 100.00 / 99.81 %
-with 0.07 / 0.27 % gross, median 0.060 / 0.088 mm, p95 0.214 / 0.459 mm. Every condition but
-the printed target has 0.00 % gross (green vertical 0.05 %) and 100 % detection
-(saturated + sun vertical 99.74 %); the crossing of two clipped stripes, the worst case
-before (0.75–2.2 % gross), is now clean. The old default (MED + Steger, R−G, σ 2): 86.55 /
-89.47 %, 41.33 / 42.83 % gross, medians 0.294 / 0.371 mm. MED in front of linked (horizontal
-stripe) makes the median worse on every preset and laser colour (by 3–9 %) and breaks
-saturated cores (25.6 % gross), so MED is not part of it; the paper's MED + Steger stays as
-method "med" (Table 6). Flat wall, no bead in view
-(rendered, seeds 41–42): undistorted centres scatter 0.061–0.067 px RMS about a straight line
-for saturated horizontal stripes (0.08–0.10 px vertical; MED + Steger 1.5–3.6 px).
+centres, median 0.066 / 0.082 mm, p95 0.277 / 0.385 mm; the column-profile version without
+the path smoothing and the reflectance division 100.00 / 99.81 %, 0.07 / 0.27 % gross (all
+vertical gross from the printed target: 2.38 %, median 0.36 mm), median 0.060 / 0.088 mm,
+p95 0.214 / 0.459 mm; this version (commit 0ee39e6) finds 100.00 / 99.97 % with
+0.00 / 0.01 % gross, median 0.040 / 0.052 mm, p95 0.190 / 0.225 mm (printed target vertical:
+100 %, 0.00 % gross, median 0.068 mm). The old default (MED + Steger, R−G, σ 2): 86.50 /
+89.59 %, 41.30 / 42.90 % gross, medians 0.254 / 0.329 mm. MED in front of linked (horizontal
+stripe) makes the median worse (0.061 mm pooled) and breaks saturated cores, so MED is not
+part of it; the paper's MED + Steger stays as method "med" (Table 6). Flat wall, no bead in
+view (`experiments/flat_wall.py`, saturated stripes with and without sun, seeds 51–54 held
+out; 41–42 were used in development): undistorted centres scatter 0.030–0.049 px RMS about a
+straight line horizontally, 0.020–0.072 px vertically (one of 8 above 0.07), largest
+distance 0.37 px; MED + Steger 0.12–63 px.
 
-Missed goals of issue 11: gross ≤ 0.1 % for the vertical stripe (0.27 %, all from the printed
-target: 2.38 % gross, median 0.36 mm — the print's reflectance steps under the thin stripe
-move its centre and 6 px smoothing along the stripe spreads that; the first version had
-0.69 % / 0.145 mm there); median ≤ 0.03 mm and p95 ≤ 0.1 mm: the error is laser speckle
-(contrast 0.5, ≈ 1 px grain): on a clean rendered scene the median is 0.08 px with speckle
-and 0.01 px without, and averaging more of it along the stripe costs the bead's corners
-(above). Cost per frame and stripe, warm, horizontal / vertical: 32 / 32 ms of CPU time
-(median of 27 calls over 9 development frames of every condition); wall time in the experiment
-31 / 31 ms, the old default's (MED + Steger) 68 / 76 ms, with the shared 2-core machine at load
-5–7; ≈ 700 ms before this rework (the 74-image kurtosis search alone took 2.1 s under load,
-two 2-D Hessian passes, whole-frame sorts for the medians, filters fused badly along axis 0).
+Missed goals of issue 11: median ≤ 0.03 mm and p95 ≤ 0.1 mm. The error left is laser speckle
+(contrast 0.5, ≈ 1 px grain; on a clean rendered scene the median is 0.08 px with speckle and
+0.01 px without before path smoothing) and, for the p95, the bead's corners, which the 6 px
+smoothing along the stripe rounds before the path is formed (a shorter smoothing lost
+detection; `cslx.segmentation.path`). Cost per frame and stripe, warm, horizontal / vertical,
+wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
+same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
+path smoothing alone ≈ 1 ms per stripe); ≈ 700 ms before the column-profile rework.
 """
 
 from __future__ import annotations
@@ -350,9 +356,21 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
     if SMOOTH_PATH:
         scatter = _path_scatter(jnp.nan_to_num(pos), valid, 2 * PATH_HALF_WINDOW)
-        smoothed, factor = smooth_path(jnp.nan_to_num(pos), valid, scatter)
+        # Within 2 SIGMA_ALONG of the image border the smoothing along the stripe mirrors
+        # the image (a tilted stripe bends towards the border's normal there): those
+        # centres take the value of the fit through the interior ones.
+        j = jnp.arange(pos.shape[0])
+        edge = int(round(1.5 * SIGMA_ALONG))
+        inside = (j >= edge) & (j < pos.shape[0] - edge)
+        smoothed, factor = smooth_path(jnp.nan_to_num(pos), valid, scatter, support=inside)
         pos = jnp.where(valid, smoothed, pos)
-        sig = jnp.where(valid, sig * factor, sig)
+        # The fit's white-noise factor (≈ 0.2 on plates) would make `sigma` 3× too small
+        # against the development frames' errors (median |error| / σ 0.82 / 0.75 before
+        # smoothing, H / V, 1.99 / 1.66 after scaling by it): the residual error is
+        # correlated speckle and corner bias, which averaging reduces far less (medians
+        # × 0.68 / 0.52). `sigma` is kept (median |error| / σ 0.54 / 0.42 after smoothing,
+        # 8.6 / 4.2 % beyond 2σ), and raised where a border centre is extrapolated.
+        sig = jnp.where(valid, sig * jnp.maximum(factor, 1.0), sig)
     near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, f.shape[0] - 1)
     sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
     return pos, valid, sig, sat
