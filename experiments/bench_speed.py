@@ -199,6 +199,11 @@ def bench_pipeline(b: Bench) -> None:
             "tracking mode without MED in the bands (before issue 13)",
             pipeline.PipelineConfig(roi_med=False),
         ),
+        (
+            "tracking_whole_frame",
+            "tracking mode, whole frame converted before the bands are cut (band_first=False)",
+            pipeline.PipelineConfig(band_first=False, stats_stride=1),
+        ),
     ):
         st = pipeline.init_state(cfg, sensor.camera.image_size)
         _, st = pipeline.process_frame(sensor, cfg, frames[0], st)
@@ -565,17 +570,32 @@ def bench_tracking_pieces(b: Bench) -> None:
                 budget,
             ),
         )
-    frame_stats = jax.jit(
-        lambda rgb: (
-            jnp.mean(rgb.astype(jnp.float32)),
-            jnp.mean(jnp.any(rgb >= 255, axis=-1).astype(jnp.float32)),
+    from cslx.runtime import band_input
+
+    for stripe, axis, start, size in (("h", 0, row0, hh), ("v", 1, col0, hw)):
+        cut = jax.jit(
+            lambda rgb, axis=axis, start=start, size=size: band_input.band_image(
+                rgb, start, size, axis, WEIGHTS, jnp.float32
+            )
         )
-    )
-    b.stage["stats"] = b.add(
+        b.stage[f"band_in_{stripe}"] = b.add(
+            "stage",
+            f"tracking: {stripe} band cut from the RGB frame (colour sum, clipped-core fill)",
+            timeit(lambda i, cut=cut: _block(cut(frames[i])), list(range(F)), n, budget),
+        )
+    whole = jax.jit(lambda rgb: band_input.frame_input(rgb, WEIGHTS, jnp.float32))
+    b.stage["whole_input"] = b.add(
         "stage",
-        "tracking: frame brightness + saturation (full frame)",
-        timeit(lambda i: _block(frame_stats(frames[i])), list(range(F)), n, budget),
+        "whole frame: colour sum + clipped-core fill along both axes (before)",
+        timeit(lambda i: _block(whole(frames[i])), list(range(F)), n, budget),
     )
+    for key, stride, label in (("stats_full", 1, "full frame, before"), ("stats", 4, "1/16")):
+        fs = jax.jit(lambda rgb, stride=stride: band_input.frame_stats(rgb, jnp.float32, stride))
+        b.stage[key] = b.add(
+            "stage",
+            f"tracking: frame brightness + saturation ({label})",
+            timeit(lambda i, fs=fs: _block(fs(frames[i])), list(range(F)), n, budget),
+        )
     sensor = b.sensor
     tri = jax.jit(
         lambda ch, cv: (
@@ -1006,10 +1026,10 @@ def _targets(b: Bench) -> list[dict]:
     if "tracker_compile_cached_s" in ex:
         rows.append(
             dict(
-                target="start-up with a warm compile cache ≤ 1.5 s",
+                target="start-up with a warm compile cache ≤ 1.5 s (process start → first frame)",
                 measured=f"compile {ex['tracker_compile_cached_s']:.1f} s; process start → "
                 f"first frame {ex['tracker_start_cached_s']:.1f} s",
-                verdict=_verdict(ex["tracker_compile_cached_s"] <= 1.5),
+                verdict=_verdict(ex["tracker_start_cached_s"] <= 1.5),
             )
         )
     cv = next((r for r in b.rows if r["name"].startswith("OpenCV")), None)
@@ -1057,7 +1077,8 @@ def _markdown(b: Bench, prov, quick) -> str:
         pieces = {
             k: st[k]["time_ms"]
             for k in (
-                "colour",
+                "band_in_h",
+                "band_in_v",
                 "band_med_h",
                 "band_med_v",
                 "band_h",
@@ -1071,7 +1092,14 @@ def _markdown(b: Bench, prov, quick) -> str:
         listed = ", ".join(f"{k} {v:.2f} ms" for k, v in pieces.items())
         notes.append(
             f"- Tracking mode: {st['tracking']['time_ms']:.2f} ms with MED in the bands, "
-            f"{st['tracking_no_med']['time_ms']:.2f} ms without it (before). Pieces timed "
+            f"{st['tracking_no_med']['time_ms']:.2f} ms without it"
+            + (
+                f", {st['tracking_whole_frame']['time_ms']:.2f} ms converting the whole frame "
+                "first (before)"
+                if "tracking_whole_frame" in st
+                else ""
+            )
+            + ". Pieces timed "
             f"alone: {listed} (sum {sum(pieces.values()):.2f} ms; the rest is dispatch, "
             "band bookkeeping and the lax.cond).\n"
         )

@@ -22,12 +22,13 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Float, UInt8
 
-from ..segmentation.robust import MAX_RUN, clipped_mask, fill_clipped
+from ..segmentation.robust import MAX_RUN, clipped_mask
 
 __all__ = [
     "band_image",
     "colour_sum",
     "frame_input",
+    "fill_short_runs",
     "frame_stats",
     "image_cutter",
     "rgb_cutter",
@@ -55,14 +56,47 @@ def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"
     return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
+def _nearest(index, value, axis: int, reverse: bool, reach: int):
+    """(index, value) of the nearest sample at or before (``reverse``: after) each one
+    whose ``index`` is not −1, looked for within ``reach`` samples (−1 where none):
+    doubling shifts (1, 2, 4, …) instead of a cumulative scan over the whole axis."""
+    n = index.shape[axis]
+    shift = 1
+    while shift <= reach:
+        s = min(shift, n)
+        pad = [(0, 0)] * index.ndim
+        pad[axis] = (0, s) if reverse else (s, 0)
+        start = s if reverse else 0
+        i2 = lax.slice_in_dim(jnp.pad(index, pad, constant_values=-1), start, start + n, axis=axis)
+        v2 = lax.slice_in_dim(jnp.pad(value, pad), start, start + n, axis=axis)
+        take = (index < 0) & (i2 >= 0)
+        index, value = jnp.where(take, i2, index), jnp.where(take, v2, value)
+        shift *= 2
+    return index, value
+
+
+def fill_short_runs(mono, clipped, axis: int, max_run: int = MAX_RUN):
+    """`cslx.segmentation.robust.fill_clipped`'s filled image, without its scans and gathers.
+
+    A run of at most ``max_run`` clipped samples has its unclipped flanks within
+    ``max_run + 1`` samples of each of its pixels, so the nearest unclipped sample before
+    and after is looked for only that far (`_nearest`, 5 doubling steps for 24); a pixel
+    with no flank that near lies in a longer run, or one touching the border, which
+    ``fill_clipped`` leaves as it is too. Same values (tests/runtime/test_band_input.py).
+    """
+    idx = lax.broadcasted_iota(jnp.int32, mono.shape, axis)
+    own = jnp.where(clipped, -1, idx)
+    above, fa = _nearest(own, mono, axis, False, max_run + 1)
+    below, fb = _nearest(own, mono, axis, True, max_run + 1)
+    run = clipped & (above >= 0) & (below >= 0) & (below - above - 1 <= max_run)
+    return jnp.where(run, 1.5 * jnp.maximum(jnp.maximum(fa, fb), 0.0), mono)
+
+
 def _monochrome(rgb, weights, dtype, fill: bool, axis: int):
     I = colour_sum(rgb, weights, dtype)
     if not fill:
         return I
-    clip = clipped_mask(rgb)
-    # Most frames have no clipped pixel in the band: skip the fill there (on the CPU
-    # `lax.cond` runs one branch only).
-    return lax.cond(jnp.any(clip), lambda: fill_clipped(I, clip, axis=axis)[0], lambda: I)
+    return fill_short_runs(I, clipped_mask(rgb), axis)
 
 
 def band_image(
@@ -108,9 +142,10 @@ def frame_input(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
     I = colour_sum(rgb, weights, dtype)
     if fill:
         # clipped pixels hold lower bounds: fill each short run along the stripe's search
-        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
+        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`'s values, computed by
+        # `fill_short_runs`), one image per stripe
         clip = clipped_mask(rgb)
-        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
+        I = (fill_short_runs(I, clip, 0), fill_short_runs(I, clip, 1))
     return I
 
 

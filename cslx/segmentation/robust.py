@@ -190,11 +190,16 @@ def _grid_scores(image, candidates: np.ndarray):
         ],
         -1,
     )
-    u = s2 @ jnp.asarray(_form_coefficients(candidates, _PAIRS).T, image.dtype)
+    c2 = jnp.asarray(_form_coefficients(candidates, _PAIRS).T, image.dtype)
+    u = s2 @ c2
     f = s4 @ jnp.asarray(_form_coefficients(candidates, _QUADS).T, image.dtype)
-    # The flat-column guard of `colour.column_kurtosis`.
+    # The flat-column guard of `colour.column_kurtosis`, plus one for spaces that are flat
+    # only up to rounding: a space that cancels every varying channel (B alone beside a
+    # constant G and B) gets u from cancelling terms of size Σ|c||s2|, i.e. rounding noise,
+    # and f / u² of that noise scored highest. Such a column counts as flat (neutral).
     tiny = jnp.finfo(u.dtype).tiny ** 0.25
-    ok = u > tiny * jnp.maximum(jnp.max(u, axis=0), tiny)
+    rounding = 64 * jnp.finfo(u.dtype).eps * (jnp.abs(s2) @ jnp.abs(c2))
+    ok = (u > tiny * jnp.maximum(jnp.max(u, axis=0), tiny)) & (u > rounding)
     u_safe = jnp.where(ok, u, 1.0)
     k = jnp.where(ok, f / (u_safe * u_safe), 3.0 / m)
     return jnp.mean(m * k - 3.0, axis=0)

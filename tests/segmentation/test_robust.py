@@ -159,3 +159,18 @@ def test_tilted_stripe_stays_straight_up_to_the_image_border():
     assert np.isfinite(err).all()
     assert err_raw[0] > 1.0  # the mirrored border bends the raw path by > 1 px
     assert err[:4].max() < 0.2 and err[-4:].max() < 0.2
+
+
+def test_kurtosis_search_ignores_spaces_flat_up_to_rounding():
+    # A red stripe beside perfectly constant G and B (float32): a space that cancels R
+    # (e.g. −2G + 2B) is flat, and its rounding noise must not outscore the stripe.
+    from cslx.segmentation.robust import search_space_unclipped
+
+    rng = np.random.default_rng(3)
+    img, v_true = _cross(rng)
+    rgb = np.stack([img, np.full_like(img, 40.0), np.full_like(img, 30.0)], -1)
+    w = np.asarray(search_space_unclipped(rgb.astype(np.float32), axis=0))
+    assert w[0] > 0
+    mono = rgb @ w
+    rows = np.argmax(mono[:, :100], axis=0)  # left of the vertical stripe
+    assert np.all(np.abs(rows - v_true[:100]) <= 1.5)
