@@ -46,7 +46,11 @@ sighting that agrees with it within `junction_gate_mm` (issue 12: in rendered su
 report where the stripes cross, 42 mm from the truth, pushed the turn past the T), or by
 three rejected sightings in a row that agree with each other (the first sighting was the
 stray one); when
-x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` → TURN: rotate by ±90°
+x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` + the braking distance v²/(2 `accel_max`)
+(the robot brakes while it starts turning; without that term it came to rest ≈ 1.3–2.9 mm
+past the T in Figure 22's runs) → TURN: rotate by 90° plus the followed weld's last heading
+estimate (the crossing weld is perpendicular to the weld, not to the robot: a 1° heading
+left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld after the turn), ±
 (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
 turned angle is integrated from the commanded ω, or from the measured heading when the
 caller passes it → FOLLOW, ignoring junction sightings for `junction_ignore_mm` of travel.
@@ -90,7 +94,7 @@ class ControllerConfig:
     turn_direction: int = +1  # +1 left (CCW), −1 right
     turn_rate: float = 0.3  # rad/s during TURN
     turn_radius_mm: float = 0.0  # 0 = in place
-    junction_tolerance_mm: float = 2.0
+    junction_tolerance_mm: float = 0.5
     junction_ignore_mm: float = 150.0
     junction_min_confidence: float = 0.3
     junction_gate_mm: float = 15.0  # a later sighting farther than this from x_j is ignored
@@ -148,6 +152,8 @@ class PathController:
         self._stray: list[float] = []  # junction sightings the gate rejected, dead-reckoned
         self.turned = 0.0
         self._turn_start_heading: float | None = None
+        self._weld_heading = 0.0  # last finite heading of the followed weld, rad
+        self._turn_angle = math.pi / 2
         self._ignore_left = 0.0
         self.turns_completed = 0
         #: seconds since the last confident observation (module docstring, "Never blind")
@@ -240,6 +246,8 @@ class PathController:
             self._advance_junction(self.v, dt)
             return self._emit(0.0, 0.0)  # blind: stop now, keep the state
 
+        if self.state is not State.TURN and math.isfinite(_finite(heading_deg, math.nan)):
+            self._weld_heading = math.radians(float(heading_deg))
         if self.state is State.TURN:
             if robot_heading_rad is not None:
                 if self._turn_start_heading is None:
@@ -248,7 +256,7 @@ class PathController:
                 self.turned = abs(math.atan2(math.sin(d), math.cos(d)))
             else:
                 self.turned += abs(self.omega) * dt
-            remaining = math.pi / 2 - self.turned
+            remaining = self._turn_angle - self.turned
             if remaining <= 1e-3:
                 self.state = State.FOLLOW
                 self._ignore_left = c.junction_ignore_mm
@@ -272,7 +280,7 @@ class PathController:
                 self._sight(float(junction_x_mm))
             v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
             self._advance_junction(v, dt)
-            if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:
+            if self._at_turning_point():
                 self._start_turn()
             return self._emit(v, w)
         if not seen_offset or scale <= 0.0:
@@ -289,7 +297,7 @@ class PathController:
 
         speed = c.v_nominal * scale
         if self.state is State.APPROACH_JUNCTION:
-            if self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm:
+            if self._at_turning_point():
                 self._start_turn()
                 v, w = self._limit(0.0, 0.0, dt)
                 return self._emit(v, w)
@@ -320,10 +328,21 @@ class PathController:
         room = max(self.junction_x - c.turn_radius_mm, 0.0)
         return min(speed, math.sqrt(2.0 * c.accel_max * room))
 
+    def _at_turning_point(self) -> bool:
+        """x_j within the tolerance plus the distance the robot needs to brake to rest."""
+        c = self.config
+        stop = self.v * self.v / (2.0 * c.accel_max)
+        return self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm + stop
+
     def _start_turn(self) -> None:
         self.state = State.TURN
         self.turned = 0.0
         self._turn_start_heading = None
+        # the crossing weld is perpendicular to the followed one, not to the robot: turn by
+        # 90° plus the followed weld's last heading (CCW +), at most 10° either way
+        c = self.config
+        extra = max(-0.175, min(0.175, c.turn_direction * self._weld_heading))
+        self._turn_angle = math.pi / 2 + extra
 
     def _advance_junction(self, v: float, dt: float) -> None:
         if self.junction_x is not None:

@@ -9,7 +9,8 @@ rule; the paper gives none):
 - confirm: a sighting that agrees within `tol_mm` with an earlier one of the last `window`
   frames confirms a junction there;
 - hold: a confirmed junction is reported, at the median of its supporting sightings (moved
-  to now), for up to `hold` frames after its last supporting sighting while it lies inside
+  to now); once `hold_min_support` sightings support it (before that only in frames with a
+  sighting), for up to `hold` frames after its last supporting sighting while it lies inside
   the vertical stripe's measured extent — single frames without a sighting (sun, glare, a
   low crossing bead on the stem's flank) no longer drop the report;
 - the farther one wins: a newly confirmed junction at a larger x_r than the held one
@@ -37,10 +38,17 @@ class JunctionTrack:
     """Sightings → a confirmed, held junction (module docstring). x in mm, frames as ints."""
 
     def __init__(
-        self, window: int, tol_mm: float, hold: int, unseen_mm: float = math.inf, margin_mm=10.0
+        self,
+        window: int,
+        tol_mm: float,
+        hold: int,
+        unseen_mm: float = math.inf,
+        margin_mm: float = 10.0,
+        hold_min_support: int = 1,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
+        self.hold_min_support = int(hold_min_support)
         self.reset()
 
     def reset(self) -> None:
@@ -82,6 +90,8 @@ class JunctionTrack:
         if extent is not None:
             self.history = [*self.history[-4 * self.window :], (now, self.travelled, *extent)]
         held = bool(self.support) and now - self.last <= self.hold
+        if len(self.support) < self.hold_min_support:
+            held = held and self.last == now  # too few sightings yet: only when seen
         xj = self.x
         if not held or extent is None or not extent[0] <= xj <= extent[1]:
             return math.nan

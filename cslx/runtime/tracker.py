@@ -66,8 +66,9 @@ Junction: the pipeline flags a crossing bead on the vertical stripe at x_r = x_j
 sighting counts if that bead is at least `junction_min_height_mm` high, and the tracker
 reports it once two sightings within `junction_window` frames agree within
 `junction_tol_mm` after moving the older one by odometry (x_j −= d), which suppresses
-single-frame false alarms; it then holds the junction through up to `junction_hold` frames
-without a sighting, and a farther confirmed junction replaces a nearer one
+single-frame false alarms; once three sightings support it, it holds the junction through
+up to `junction_hold` frames without a sighting; a farther confirmed junction replaces a
+nearer one, and one whose place was in view unseen for > 20 mm of travel is ignored
 (`cslx.runtime.junction_track.JunctionTrack`).
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
@@ -325,7 +326,11 @@ class Tracker:
         self._confidence = 0.0
         c = self.kalman
         self._junctions = JunctionTrack(
-            c.junction_window, c.junction_tol_mm, c.junction_hold, c.junction_unseen_mm
+            c.junction_window,
+            c.junction_tol_mm,
+            c.junction_hold,
+            c.junction_unseen_mm,
+            hold_min_support=c.junction_hold_min_support,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0

@@ -171,9 +171,11 @@ def test_t_junction_turn_and_follow_new_weld(direction, measured):
         if cmd.state != states[-1]:
             states.append(cmd.state)
     assert states == [State.FOLLOW, State.APPROACH_JUNCTION, State.TURN, State.FOLLOW]
-    i_turn = next(i for i, c in enumerate(cmds) if c.state is State.TURN)
-    x_turn = trail[i_turn][0]
-    assert abs(x_turn - 600.0) < 3.0  # turned on the crossing weld
+    # turned on the crossing weld: it brakes while it starts turning, and comes to rest there
+    i_end = max(i for i, c in enumerate(cmds) if c.state is State.TURN)
+    assert abs(trail[i_end][0] - 600.0) < 1.5, trail[i_end]
+    # by 90° plus the weld's heading: square to the crossing weld as the turn ends
+    assert math.degrees(trail[i_end + 1][2]) == pytest.approx(90.0 * direction, abs=0.5)
     x, y, th = trail[-1]
     assert math.degrees(th) == pytest.approx(90.0 * direction, abs=1.0)
     assert abs(x - 600.0) < 1.0  # following the crossing weld
@@ -363,3 +365,26 @@ def test_junction_reacquired_when_the_first_sighting_was_stray():
         ctrl.update(0.05, 0.0, 0.0, 0.9, junction=True, junction_x_mm=true_x)
         true_x -= ctrl.v * 0.05
     assert ctrl.junction_x == pytest.approx(true_x, abs=2.0)
+
+
+@pytest.mark.parametrize("direction", [+1, -1])
+def test_turn_squares_to_the_crossing_weld(direction):
+    """Followed weld seen at +2° (CCW) when the T is reached: the bar is at 90° to the weld,
+    so the turn is 90° + direction·2° (was 90° to the robot); it brakes onto the T."""
+    c = ControllerConfig(turn_direction=direction)
+    ctrl = PathController(c)
+    dt, x_j = 0.05, 60.0
+    for _ in range(10):  # follow at speed, T sighted ahead
+        ctrl.update(dt, 0.0, 2.0, 1.0, junction=True, junction_x_mm=x_j)
+        x_j -= ctrl.v * dt
+    assert ctrl.state is State.APPROACH_JUNCTION
+    travelled, turned = 0.0, 0.0
+    for _ in range(400):
+        cmd = ctrl.update(dt, math.nan, math.nan, 0.0, sensor_ok=True)
+        travelled += cmd.v_mm_s * dt
+        turned += cmd.omega_rad_s * dt
+        if ctrl.turns_completed:
+            break
+    assert ctrl.turns_completed == 1
+    assert math.degrees(turned) == pytest.approx(direction * 90.0 + 2.0, abs=0.6)
+    assert travelled == pytest.approx(x_j, abs=1.0)  # at rest on the T, not past it

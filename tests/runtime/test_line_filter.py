@@ -78,3 +78,9 @@ def test_artefact_appearing_mid_view_is_not_a_junction():
     # the same sightings with the rule off are reported: the rule is what rejects them
     out = _run(JunctionTrack(10, 6.0, hold=6), seen)
     assert out[21] == pytest.approx(bump(21), abs=0.01)
+
+
+def test_junction_with_two_sightings_is_not_held():
+    bump = lambda k: 121.0 - 1.5 * k  # noqa: E731 — two sightings, then nothing
+    out = _run(JunctionTrack(10, 6.0, hold=6, hold_min_support=3), [bump, bump, None, None])
+    assert out[1] == pytest.approx(bump(1)) and all(math.isnan(v) for v in out[2:])
