@@ -116,3 +116,21 @@ def test_black_frame_keeps_state_finite(scene):
     assert not bool(result.feature_h.found) and not bool(new.tracking)
     with pytest.raises(ValueError, match="calibration is 640×480"):
         process_frame(sensor, config, black[:100], state)
+
+
+def test_tracking_loop_compiles_once(scene):
+    """Carrying the state from frame to frame hits the jit cache (issue 13: a re-trace per
+    call would be a hidden per-frame cost); the state keeps its dtypes and shapes."""
+    from cslx.runtime.pipeline import _process_frame
+
+    sensor, config, frames = scene
+    state = init_state(config, sensor.camera.image_size)
+    _, state = process_frame(sensor, config, frames[0][0], state)
+    size = _process_frame._cache_size()
+    first = [(x.dtype, x.shape, x.weak_type) for x in jax.tree_util.tree_leaves(state)]
+    for k in range(4):  # NumPy and device frames, two scenes
+        img = frames[k % 2][0]
+        _, state = process_frame(sensor, config, img if k % 2 else jnp.asarray(img), state)
+    assert bool(state.tracking)
+    assert _process_frame._cache_size() == size
+    assert [(x.dtype, x.shape, x.weak_type) for x in jax.tree_util.tree_leaves(state)] == first
