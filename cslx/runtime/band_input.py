@@ -2,10 +2,11 @@
 
 Tracking mode processes a band of rows around the horizontal stripe and a band of columns
 around the vertical one. Building the whole frame's colour image, its clipped mask and the
-two `fill_clipped` images (one per stripe axis) costs more than the bands' MED and
-detection together (≈ 12 ms of a 27 ms tracking frame on the 2-core CPU, results of
-experiments/bench_speed.py), so the bands are cut from the uint8 RGB frame first and only
-they are converted (`band_image`).
+two `fill_clipped` images (one per stripe axis) cost more than the bands' MED and
+detection together (whole frame 10–12 ms at load 5 on the 2-core CPU; a tracking frame
+took 53.8 ms that way and 35.8 ms band-first in the same run of experiments/bench_speed.py),
+so the bands are cut from the uint8 RGB frame first and only they are converted
+(`band_image`).
 
 Equality with the full-frame input. `fill_clipped` fills a clipped run of at most
 ``max_run`` samples along the search axis from its two unclipped flanks, and leaves runs
@@ -22,13 +23,12 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Float, UInt8
 
-from ..segmentation.robust import MAX_RUN, clipped_mask
+from ..segmentation.robust import MAX_RUN, clipped_mask, fill_clipped
 
 __all__ = [
     "band_image",
     "colour_sum",
     "frame_input",
-    "fill_short_runs",
     "frame_stats",
     "image_cutter",
     "rgb_cutter",
@@ -56,47 +56,14 @@ def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"
     return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
-def _nearest(index, value, axis: int, reverse: bool, reach: int):
-    """(index, value) of the nearest sample at or before (``reverse``: after) each one
-    whose ``index`` is not −1, looked for within ``reach`` samples (−1 where none):
-    doubling shifts (1, 2, 4, …) instead of a cumulative scan over the whole axis."""
-    n = index.shape[axis]
-    shift = 1
-    while shift <= reach:
-        s = min(shift, n)
-        pad = [(0, 0)] * index.ndim
-        pad[axis] = (0, s) if reverse else (s, 0)
-        start = s if reverse else 0
-        i2 = lax.slice_in_dim(jnp.pad(index, pad, constant_values=-1), start, start + n, axis=axis)
-        v2 = lax.slice_in_dim(jnp.pad(value, pad), start, start + n, axis=axis)
-        take = (index < 0) & (i2 >= 0)
-        index, value = jnp.where(take, i2, index), jnp.where(take, v2, value)
-        shift *= 2
-    return index, value
-
-
-def fill_short_runs(mono, clipped, axis: int, max_run: int = MAX_RUN):
-    """`cslx.segmentation.robust.fill_clipped`'s filled image, without its scans and gathers.
-
-    A run of at most ``max_run`` clipped samples has its unclipped flanks within
-    ``max_run + 1`` samples of each of its pixels, so the nearest unclipped sample before
-    and after is looked for only that far (`_nearest`, 5 doubling steps for 24); a pixel
-    with no flank that near lies in a longer run, or one touching the border, which
-    ``fill_clipped`` leaves as it is too. Same values (tests/runtime/test_band_input.py).
-    """
-    idx = lax.broadcasted_iota(jnp.int32, mono.shape, axis)
-    own = jnp.where(clipped, -1, idx)
-    above, fa = _nearest(own, mono, axis, False, max_run + 1)
-    below, fb = _nearest(own, mono, axis, True, max_run + 1)
-    run = clipped & (above >= 0) & (below >= 0) & (below - above - 1 <= max_run)
-    return jnp.where(run, 1.5 * jnp.maximum(jnp.maximum(fa, fb), 0.0), mono)
-
-
 def _monochrome(rgb, weights, dtype, fill: bool, axis: int):
     I = colour_sum(rgb, weights, dtype)
     if not fill:
         return I
-    return fill_short_runs(I, clipped_mask(rgb), axis)
+    clip = clipped_mask(rgb)
+    # Most frames have no clipped pixel in the band: skip the fill there (on the CPU
+    # `lax.cond` runs one branch only).
+    return lax.cond(jnp.any(clip), lambda: fill_clipped(I, clip, axis=axis)[0], lambda: I)
 
 
 def band_image(
@@ -142,10 +109,9 @@ def frame_input(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
     I = colour_sum(rgb, weights, dtype)
     if fill:
         # clipped pixels hold lower bounds: fill each short run along the stripe's search
-        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`'s values, computed by
-        # `fill_short_runs`), one image per stripe
+        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
         clip = clipped_mask(rgb)
-        I = (fill_short_runs(I, clip, 0), fill_short_runs(I, clip, 1))
+        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
     return I
 
 

@@ -118,8 +118,8 @@ class PipelineConfig(eqx.Module):
     band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
         convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
         `fill_clipped`; equal to the bands of the converted frame). False converts the
-        whole frame first (before issue 13: the two whole-frame `fill_clipped` images cost
-        ≈ 12 ms of a 27 ms tracking frame). first_pass_stride: with ``band_first``, the
+        whole frame first (before; tracking frames 53.8 ms against 35.8 ms in one run of
+        experiments/bench_speed.py at load 5–6). first_pass_stride: with ``band_first``, the
         first pass looks at every k-th column (row) only; its band is the median of those
         peaks. stats_stride: brightness and saturated share from every k-th row and column
         (`cslx.runtime.band_input.frame_stats`; 1 = the whole frame).
