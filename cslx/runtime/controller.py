@@ -265,8 +265,12 @@ class PathController:
                 self._stray = []
                 v_t, w_t = 0.0, 0.0
             else:
-                # slow down near the end so the angle does not overshoot (|ω| ≤ √(2 α θ))
-                rate = min(c.turn_rate, math.sqrt(2 * c.alpha_max * remaining), remaining / dt)
+                # slow down near the end so the angle does not overshoot: |ω| ≤ √(α θ') with θ'
+                # the remaining angle less what the last command still turns (one frame of
+                # lag) and half the braking rate, as ω can fall only α·dt per frame (with
+                # √(2 α θ) Figure 22's robot went on turning for 1–1.5° after the turn ended)
+                ahead = max(remaining - abs(self.omega) * dt, 0.0)
+                rate = min(c.turn_rate, math.sqrt(c.alpha_max * ahead), remaining / dt)
                 w_t = c.turn_direction * rate
                 v_t = rate * c.turn_radius_mm
             v, w = self._limit(v_t, w_t, dt)

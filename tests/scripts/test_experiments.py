@@ -76,3 +76,25 @@ def test_fig07_writes_png(tmp_path):
     # Kurtosis is the search's criterion: its pick scores at least as high as R, gray, R−G.
     pick = next(v for k, v in by.items() if k.startswith("kurtosis pick"))
     assert pick["kurtosis"] >= max(by[k]["kurtosis"] for k in ("R", "gray", "R−G")) - 1e-3
+
+
+def test_flat_wall_line_residuals_undistort_before_the_line_fit():
+    """A straight line in the undistorted image, distorted by the lens, fits with zero residual
+    once undistorted; added orthogonal noise comes back as its RMS."""
+    import jax.numpy as jnp
+
+    from cslx.sensor import default_sensor
+    from cslx.sensor.camera import distort, normalized_to_pixel
+    from experiments.flat_wall import line_residuals
+
+    camera = default_sensor().camera
+    t = np.linspace(-0.35, 0.35, 400)
+    xy = np.stack([t, 0.12 + 0.3 * t], axis=1)  # a tilted straight line (normalized)
+    uv = np.asarray(normalized_to_pixel(distort(jnp.asarray(xy), camera.dist), camera), float)
+    bent = np.abs(np.polyfit(uv[:, 0], uv[:, 1], 1, full=True)[1][0] / len(uv)) ** 0.5
+    assert bent > 0.05  # the lens bends it in pixels
+    assert np.sqrt(np.mean(line_residuals(uv, camera) ** 2)) < 0.01
+    noise = np.random.default_rng(0).normal(0, 0.2, len(uv))
+    normal = np.array([-0.3, 1.0]) / np.hypot(0.3, 1.0)  # ≈ the image normal of the line
+    rms = np.sqrt(np.mean(line_residuals(uv + noise[:, None] * normal, camera) ** 2))
+    assert rms == pytest.approx(0.2, rel=0.15)
