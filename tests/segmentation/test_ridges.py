@@ -125,6 +125,48 @@ def test_fill_clipped_makes_one_symmetric_bump():
     assert bool(clipped_mask(np.full((2, 2, 3), 255, np.uint8)).all())
 
 
+def _fill_reference(mono, clipped, max_run):
+    """Run-by-run NumPy fill along axis 0: runs inside the column, ≤ max_run, from flanks."""
+    out, run = mono.copy(), np.zeros_like(clipped)
+    n = mono.shape[0]
+    for j in range(mono.shape[1]):
+        i = 0
+        while i < n:
+            if not clipped[i, j]:
+                i += 1
+                continue
+            k = i
+            while k < n and clipped[k, j]:
+                k += 1
+            if i > 0 and k < n and k - i <= max_run:
+                out[i:k, j] = 1.5 * max(mono[i - 1, j], mono[k, j], 0.0)
+                run[i:k, j] = True
+            i = k
+    return out, run
+
+
+def test_fill_clipped_equals_run_by_run_reference_on_both_axes():
+    """Runs of every length around max_run, at the borders and in the interior."""
+    rng = np.random.default_rng(5)
+    mono = rng.normal(0, 40, (90, 70)).astype(np.float32)
+    clipped = np.zeros((90, 70), bool)
+    for _ in range(300):
+        i, j, length = rng.integers(0, 90), rng.integers(0, 70), rng.integers(1, 30)
+        clipped[i : i + length, j] = True
+    clipped[:4, :5] = True  # runs touching the top border
+    clipped[-3:, 10:14] = True  # and the bottom one
+    for axis in (0, 1):
+        m, c = (mono, clipped) if axis == 0 else (mono.T.copy(), clipped.T.copy())
+        ref_out, ref_run = _fill_reference(mono, clipped, 24)
+        out, run = fill_clipped(m, c, axis=axis, max_run=24)
+        out, run = (np.asarray(out), np.asarray(run))
+        if axis == 1:
+            out, run = out.T, run.T
+        assert 0 < ref_run.sum() < clipped.sum()  # some runs filled, some left
+        np.testing.assert_array_equal(run, ref_run)
+        np.testing.assert_array_equal(out, ref_out)
+
+
 def test_predicted_sigma_matches_scatter():
     """The predicted std of the centre agrees with the scatter over noise draws."""
     u_err, preds = [], []
