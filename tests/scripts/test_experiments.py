@@ -98,3 +98,27 @@ def test_flat_wall_line_residuals_undistort_before_the_line_fit():
     normal = np.array([-0.3, 1.0]) / np.hypot(0.3, 1.0)  # ≈ the image normal of the line
     rms = np.sqrt(np.mean(line_residuals(uv + noise[:, None] * normal, camera) ** 2))
     assert rms == pytest.approx(0.2, rel=0.15)
+
+
+def test_tracking_sequence_verdicts_name_the_worst_run():
+    from experiments.tracking_sequences import GOALS, verdicts
+
+    good = dict(
+        seed=1,
+        placement="beside",
+        nuisance="clean",
+        estimate_pct=100.0,
+        offset_mean_mm=0.1,
+        offset_max_mm=0.5,
+        heading_mean_deg=0.3,
+        t_recall_pct=95.0,
+        t_false=0,
+    )
+    bad = dict(good, nuisance="sunny", heading_mean_deg=0.8, t_false=2)
+    lines = verdicts([good, bad])
+    assert len(lines) == 2 + len(GOALS)
+    by_goal = {line.split(" | ")[0].lstrip("| "): line for line in lines[2:]}
+    assert by_goal["heading error mean ≤ 0.5°"].endswith("**missed** |")
+    assert "1 of 2 | 0.8 (beside sunny 1)" in by_goal["heading error mean ≤ 0.5°"]
+    assert "1 of 2 | 2 (beside sunny 1)" in by_goal["no T reported where it is not"]
+    assert by_goal["offset error max ≤ 1 mm"].endswith("**met** |")
