@@ -23,6 +23,15 @@ rule; the paper gives none):
   than `unseen_mm` of travel before its first sighting is an artefact that appeared
   mid-view (the flank bumps above, sun and glare: 24–27 mm unseen; the bar ≤ 10.5 mm on the
   dev seeds, missed where it first enters the view).
+- beyond the followed weld: the crossing weld ends the followed weld, which the horizontal
+  stripe still sees at x_r = `x_min_mm` (the tracker's x_ref), so a new junction nearer than
+  that is an artefact (dev seed 1203, flank, glare: bumps at 121–124 mm confirmed before the
+  bar was in view); a held junction is still reported when it comes nearer.
+- odometry moves sightings as the plate points they are: x −= d, then the turn δ about the
+  robot, x ← cos δ · x + sin δ · y with y the vertical stripe's y_r (≈ −39 mm on the default
+  rig). The ±3.5° heading wobble of the rendered approaches turns by up to 0.27° a frame,
+  which moves the crossing weld on the stripe by 0.19 mm a frame against x −= d alone;
+  a held position, the median of up to 10 frames of sightings, lagged up to ≈ 1 mm behind.
 """
 
 from __future__ import annotations
@@ -45,10 +54,13 @@ class JunctionTrack:
         unseen_mm: float = math.inf,
         margin_mm: float = 10.0,
         hold_min_support: int = 1,
+        x_min_mm: float = -math.inf,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
         self.hold_min_support = int(hold_min_support)
+        self.x_min = float(x_min_mm)
+        self.stripe_y = 0.0  # y_r of the vertical stripe (mm), from `update`
         self.reset()
 
     def reset(self) -> None:
@@ -58,11 +70,14 @@ class JunctionTrack:
         self.travelled = 0.0  # mm since the start
         self.history: list[tuple[int, float, float, float]] = []  # (frame, travelled, extent)
 
-    def move(self, d: float) -> None:
-        """The robot advanced d mm: everything on the plate comes d closer."""
-        self.sightings = [(f, x - d) for f, x in self.sightings]
+    def move(self, d: float, delta: float = 0.0) -> None:
+        """The robot advanced d mm and turned δ rad (CCW +): plate points on the stripe move
+        to x ← cos δ · (x − d) + sin δ · y (module docstring)."""
+        c, s = math.cos(delta), math.sin(delta)
+        y = self.stripe_y
+        self.sightings = [(f, c * (x - d) + s * y) for f, x in self.sightings]
         self.travelled += d
-        self.support = [(f, x - d) for f, x in self.support]
+        self.support = [(f, c * (x - d) + s * y) for f, x in self.support]
 
     @property
     def x(self) -> float:
@@ -70,11 +85,20 @@ class JunctionTrack:
             return math.nan
         return float(np.median([x for _, x in self.support]))
 
-    def update(self, now: int, x: float | None, extent: tuple[float, float] | None) -> float:
+    def update(
+        self,
+        now: int,
+        x: float | None,
+        extent: tuple[float, float] | None,
+        stripe_y: float | None = None,
+    ) -> float:
         """Add this frame's sighting (None: none); the junction's x_r to report, else NaN.
 
         extent: (min, max) x_r of the vertical stripe's measured points this frame.
+        stripe_y: the vertical stripe's y_r this frame (mm), for `move`'s turn; None keeps it.
         """
+        if stripe_y is not None and math.isfinite(stripe_y):
+            self.stripe_y = float(stripe_y)
         self.sightings = [(f, xo) for f, xo in self.sightings if now - f <= self.window]
         self.support = [(f, xo) for f, xo in self.support if now - f <= self.window]
         held = bool(self.support) and now - self.last <= self.hold
@@ -98,7 +122,10 @@ class JunctionTrack:
         return xj
 
     def _fresh(self, x: float, agree: list[tuple[int, float]]) -> bool:
-        """False if the plate where x lies was in view for > `unseen_mm` of travel unseen."""
+        """False if x is nearer than `x_min_mm`, or the plate where it lies was in view for
+        > `unseen_mm` of travel unseen."""
+        if x < self.x_min:
+            return False
         f0 = min(f for f, _ in agree)
         d0 = next((dd for f, dd, *_ in self.history if f == f0), None)
         if d0 is None:

@@ -65,11 +65,12 @@ that the plate is where odometry says while it dead-reckons through a T-junction
 Junction: the pipeline flags a crossing bead on the vertical stripe at x_r = x_j; a
 sighting counts if that bead is at least `junction_min_height_mm` high, and the tracker
 reports it once two sightings within `junction_window` frames agree within
-`junction_tol_mm` after moving the older one by odometry (x_j −= d), which suppresses
-single-frame false alarms; once three sightings support it, it holds the junction through
-up to `junction_hold` frames without a sighting; a farther confirmed junction replaces a
-nearer one, and one whose place was in view unseen for > 20 mm of travel is ignored
-(`cslx.runtime.junction_track.JunctionTrack`).
+`junction_tol_mm` after moving the older one by odometry (x_j −= d, then the turn δ about
+the robot at the vertical stripe's y_r), which suppresses single-frame false alarms; once
+three sightings support it, it holds the junction through up to `junction_hold` frames
+without a sighting; a farther confirmed junction replaces a nearer one, and one whose place
+was in view unseen for > 20 mm of travel, or nearer than x_ref (where the horizontal stripe
+still sees the followed weld), is ignored (`cslx.runtime.junction_track.JunctionTrack`).
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -331,6 +332,7 @@ class Tracker:
             c.junction_hold,
             c.junction_unseen_mm,
             hold_min_support=c.junction_hold_min_support,
+            x_min_mm=self.x_ref,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
@@ -426,7 +428,7 @@ class Tracker:
         if index > 0:
             self.filter.predict(d, delta)
             self._carry_history(d, delta)
-            self._junctions.move(d)
+            self._junctions.move(d, delta)
         try:
             why = self._check(frame)
             if why is None:
@@ -522,7 +524,9 @@ class Tracker:
         x = raw["v_x_mm"] if raw["junction"] > 0.5 and tall else None
         xs = points_v[:, 0][np.isfinite(points_v[:, 0])] if points_v.ndim == 2 else points_v[:0]
         extent = (float(xs.min()), float(xs.max())) if xs.size else None
-        xj = self._junctions.update(obs.frame, x, extent)
+        ys = points_v[:, 1][np.isfinite(points_v[:, 1])] if points_v.ndim == 2 else points_v[:0]
+        y = float(np.median(ys)) if ys.size else None
+        xj = self._junctions.update(obs.frame, x, extent, y)
         if math.isfinite(xj):
             obs.junction = True
             obs.junction_x_mm = xj

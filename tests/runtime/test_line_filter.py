@@ -84,3 +84,39 @@ def test_junction_with_two_sightings_is_not_held():
     bump = lambda k: 121.0 - 1.5 * k  # noqa: E731 — two sightings, then nothing
     out = _run(JunctionTrack(10, 6.0, hold=6, hold_min_support=3), [bump, bump, None, None])
     assert out[1] == pytest.approx(bump(1)) and all(math.isnan(v) for v in out[2:])
+
+
+def test_turn_moves_sightings_about_the_robot():
+    """A crossing weld at world x = 0 seen on the vertical stripe (y_r = −39 mm) while the
+    robot advances 1.5 mm a frame along its heading and turns 0.27° a frame (CW): the held
+    junction follows the crossing weld, which moving the sightings by x −= d alone does not."""
+    Y, d, delta = -39.0, 1.5, math.radians(-0.27)
+    X, th = -212.0, math.radians(2.0)  # robot position (world x) and heading
+
+    def seen():  # the crossing weld on the stripe: X + x cos θ − Y sin θ = 0
+        return (-X + Y * math.sin(th)) / math.cos(th)
+
+    track = JunctionTrack(10, 6.0, hold=6)
+    plain = JunctionTrack(10, 6.0, hold=6)
+    first = seen()
+    for k in range(9):  # seen in frames 0–2, held to frame 8
+        if k:
+            X += d * math.cos(th + 0.5 * delta)
+            th += delta
+            track.move(d, delta)
+            plain.move(d)
+        out = track.update(k, seen() if k < 3 else None, (96.0, 220.0), Y)
+        old = plain.update(k, seen() if k < 3 else None, (96.0, 220.0), Y)
+    assert out == pytest.approx(seen(), abs=0.1)
+    assert abs(old - seen()) > 1.0  # 8 frames of turning: > 1 mm off without the turn
+    assert first - seen() < 8 * d - 1.0  # it moved by > 1 mm less than the forward distance
+
+
+def test_no_new_junction_nearer_than_the_followed_weld():
+    bump = lambda k: 124.0 - 1.5 * k  # noqa: E731 — behind the horizontal stripe (150 mm)
+    out = _run(JunctionTrack(10, 6.0, hold=6, x_min_mm=150.0), [bump, bump, bump])
+    assert all(math.isnan(v) for v in out)
+    # a held junction is still reported when it comes nearer than x_min
+    bar = lambda k: 156.0 - 1.5 * k  # noqa: E731
+    out = _run(JunctionTrack(10, 6.0, hold=6, x_min_mm=150.0), [bar] * 8)
+    assert out[7] == pytest.approx(bar(7), abs=0.01) and bar(7) < 150.0
