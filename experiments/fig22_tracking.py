@@ -8,9 +8,9 @@ results/fig22_tracking.csv (one row per frame, with its nuisance), .md (per nuis
 completed, mean / p95 / max tracking error over all counted frames, provenance and the
 machine load) and .png (welds and robot trail, error over time, one row per nuisance).
 
-The seed (2201) was not used while developing the tracker; the controller's junction gate and
-its re-acquisition (issue 12) were found from this seed's sunny run, so for them it is not a
-held-out seed (the demo's closed loop, seed 2015, is).
+The seed (2302) is held out: the controller's junction gate, its re-acquisition and the turn
+(issue 12) were developed on seed 2201's runs, which this figure used before; no development
+ran 2302.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ NUISANCES = ("clean", "sunny", "glare", "shadow")
 
 DEFAULTS = dict(
     n_frames=420,
-    seed=2201,
+    seed=2302,
     fps=20.0,
     start_before_mm=220.0,
     start_offset_mm=4.0,

@@ -28,10 +28,10 @@ uint8 frame, the filters) are passed without copies, the tracking loop compiles 
 (tests/runtime/test_pipeline.py), and the host side (`jnp.asarray` of a NumPy frame, the
 shape checks) adds ≈ 1 ms. Fills with equal outputs tried and dropped, none faster at load 6:
 a bounded `reduce_window` search, Hillis–Steele scans with gathers or with carried flank
-values, 24 shifted selects per side. Kept: `fill_clipped` down the rows as one `lax.scan`
-(band of rows 1.56 → 0.43 ms alone), along the columns without transposes (2.1 → 1.3 ms),
-and the junction's apex arg-max as two reductions (1.67 → 0.96 ms); together the tracking
-call went 17.78 → 16.10 ms (200 interleaved frames, load 5.4–5.7, identical outputs).
+values, 24 shifted selects per side. Kept: `fill_clipped` as one `lax.scan` along its axis
+(band of rows 1.56 → 0.43 ms alone, band of columns 2.1 → 0.99 ms) and the junction's apex
+arg-max as two reductions (1.67 → 0.96 ms); together the tracking call went 14.64 →
+12.78 ms (200 interleaved frames, load 3.6–3.8, identical outputs).
 """
 
 from __future__ import annotations

@@ -134,23 +134,19 @@ def fill_clipped(mono, clipped, *, axis: int = 0, max_run: int = MAX_RUN):
     Returns (filled image, (H, W) bool mask of the filled pixels). A run touching the image
     border or longer than `max_run` is left as it is.
 
-    Along axis 0 the nearest unclipped index and value above and below every pixel come
-    from one `lax.scan` over the rows (both directions at once): XLA's CPU cumulative max
-    transposes to scan along the minor axis, and with the gathers of the flank values that
-    cost the 114×640 tracking band 1.56 ms against 0.43 ms, a 480×640 frame 6.4 against
-    2.0 ms (issue 13, load 5.6, same run). Along axis 1 the cumulative max and the reads
-    run in place: transposing cost the 480×178 band of columns 2.1 ms against 1.3 ms.
+    The nearest unclipped index and value above and below every pixel come from one
+    `lax.scan` along ``axis`` (both directions at once). XLA's CPU cumulative max transposes
+    to scan along the minor axis and then needs gathers for the flank values: that cost the
+    114×640 tracking band of rows 1.56 ms against 0.43 ms, a 480×640 frame 6.4 against
+    2.0 ms, the 480×178 band of columns 1.24 against 0.99 ms (issue 13, load 4–5.6, same
+    runs; the columns are scanned on the transposed band).
     """
-    n = mono.shape[axis]
     c = jnp.asarray(clipped)
+    n = mono.shape[axis]
     if axis == 0:
         above, fa, below, fb = _flanks_rows(mono, c)
     else:
-        idx = jnp.arange(n, dtype=jnp.int32)[None, :]
-        above = lax.cummax(jnp.where(~c, idx, -1), axis=1)  # last unclipped index ≤ i
-        below = lax.cummin(jnp.where(~c, idx, n), axis=1, reverse=True)  # first ≥ i
-        fa = jnp.take_along_axis(mono, jnp.clip(above, 0, n - 1), axis=1)
-        fb = jnp.take_along_axis(mono, jnp.clip(below, 0, n - 1), axis=1)
+        above, fa, below, fb = (x.T for x in _flanks_rows(mono.T, c.T))
     length = below - above - 1
     inner = (above >= 0) & (below < n)
     run = c & inner & (length <= max_run)
