@@ -10,7 +10,12 @@ followed weld (the stem):
   with the heading) up to the bar, and the bar's cap on top of it.
 
 Beyond the bar (larger x_r, towards the end of the stem) there is plate in both cases. So the
-bar is found from its far side (cslx's own rule): every run of points above the plate
+bar is found from its far side (cslx's own rule). Heights are taken above the plate line
+(`plate_fit`) less the lowest point within `WeldConfig.crossing_background_mm` beyond each
+point: where the stripe runs mostly on the flank the plate line sits on the flank, and the
+bar, measured against that line, came out 0.9–1.0 mm high (true 1.91, dev seed 1202), while
+against the plate just past its far toe it is measured whole and a bump on the flank only
+against the flank beyond it. Every run of points above the
 threshold whose far end (largest x_r) is bounded by plate is a candidate; within half the
 largest bead width of that far toe, its highest point is the bar's apex if the profile falls
 from it towards the toe by the apex height and rises to it from the near side (the flank of
@@ -50,6 +55,23 @@ def _first_argmax(a: Float[Array, "k n"]) -> Array:
     return jnp.min(jnp.where((a == top) | jnp.isnan(a), index, a.shape[1]), axis=1)
 
 
+def _above_far_side(
+    t: Float[Array, " n"], h: Float[Array, " n"], ok: Bool[Array, " n"], width: Float[Array, ""]
+) -> tuple[Float[Array, " n"], Float[Array, " n"]]:
+    """Height above the lowest point within ``width`` beyond (larger ``t``; cslx's own rule).
+
+    Beyond the bar there is plate in every placement, so the bar's apex is measured against
+    the plate just past its far toe, and a bump on the followed bead's flank against the flank
+    beyond it, rather than both against one plate line (which sits on the flank where the
+    stripe runs mostly on it). ``width`` ≤ 0 returns ``h``.
+    """
+    dt = t[None, :] - t[:, None]
+    beyond = ok[None, :] & (dt >= 0.0) & (dt <= width)
+    low = jnp.min(jnp.where(beyond, h[None, :], jnp.inf), axis=1)
+    low = jnp.where((width > 0.0) & ok & jnp.isfinite(low), low, 0.0)
+    return h - low, low
+
+
 def crossing_feature(
     points: Float[Array, "n 3"], valid: Bool[Array, " n"], config: WeldConfig = WeldConfig()
 ) -> WeldFeature:
@@ -80,6 +102,7 @@ def crossing_feature(
     norm = jnp.sqrt(1.0 + c1 * c1)
     t = (x + c1 * (z - c0)) / norm
     h = (z - c0 - c1 * x) / norm
+    h, level = _above_far_side(t, h, ok, config.crossing_background_mm)
 
     above = ok & (h > config.threshold_mm)
     below = ok & ~above
@@ -138,7 +161,7 @@ def crossing_feature(
     )
     # back to (x, z): the apex of the cap
     x_c = (a - c1 * height) / norm
-    z_c = c0 + (c1 * a + height) / norm
+    z_c = c0 + (c1 * a + height + level[apex[best]]) / norm
     pos = x_c + x_mean
     y_c = jnp.sum(jnp.where(sel, P[order, 1], 0.0)) / jnp.maximum(jnp.sum(sel), 1.0)
     centre = jnp.stack([pos, y_c, z_c]).astype(dtype)

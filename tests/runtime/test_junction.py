@@ -124,3 +124,33 @@ def test_first_argmax_equals_argmax():
     got = np.asarray(_first_argmax(jnp.asarray(a)))
     np.testing.assert_array_equal(got, np.asarray(jnp.argmax(jnp.asarray(a), axis=1)))
     assert got[4] == 0 and got[7] == 5 and got[8] == 0
+
+
+def _flank_to_bar(rng, bar_x, hi, lo, bar=(14.0, 1.9), n=480):
+    """The vertical stripe on the followed bead's flank from x_r = 125 mm up to the bar's near
+    toe, the flank's height going from `hi` (at 150 mm) to `lo` (at the toe); plate beyond."""
+    x = np.linspace(218.0, 97.0, n)
+    y = -40.0 - 0.0637 * (x - 150.0)
+    toe = bar_x - 0.5 * bar[0]
+    f = np.clip((x - 120.0) / 10.0, 0.0, 1.0) * np.interp(x, [150.0, toe], [hi, lo])
+    h = np.maximum(np.where(x < toe, f, 0.0), _bead_height(x - bar_x, *bar))
+    pts = np.stack([x, y, _plate_z(x, y, PLATE) + h + rng.normal(0, 0.04, n)], -1)
+    return pts, rng.random(n) > 0.05
+
+
+@pytest.mark.parametrize(
+    "bar_x,hi,lo",
+    [(205.0, 2.0, 0.8), (209.0, 1.8, 1.0), (203.0, 2.0, 0.4), (180.0, 1.6, 1.6)],
+)
+def test_crossing_on_a_flank_measured_against_the_plate_beyond(bar_x, hi, lo):
+    """Most of the stripe on the flank, the bar just entering the view (issue 12, dev seed
+    1202): its height is measured against the plate past its far toe, so it reaches the
+    tracker's 1 mm minimum; against one plate line through the flank it did not."""
+    rng = np.random.default_rng([int(bar_x), int(10 * hi), int(10 * lo)])
+    pts, valid = _flank_to_bar(rng, bar_x, hi, lo)
+    f = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig())
+    assert bool(f.found)
+    assert abs(float(f.position) - bar_x) < 1.0, float(f.position)
+    assert abs(float(f.height) - 1.9) < 0.3, float(f.height)
+    old = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig(crossing_background_mm=0.0))
+    assert not (bool(old.found) and float(old.height) >= 1.0) or lo == hi
