@@ -40,6 +40,8 @@ import math
 
 import numpy as np
 
+from .line_filter import carry
+
 __all__ = ["JunctionTrack"]
 
 
@@ -73,11 +75,10 @@ class JunctionTrack:
     def move(self, d: float, delta: float = 0.0) -> None:
         """The robot advanced d mm and turned δ rad (CCW +): plate points on the stripe move
         to x ← cos δ · (x − d) + sin δ · y (module docstring)."""
-        c, s = math.cos(delta), math.sin(delta)
         y = self.stripe_y
-        self.sightings = [(f, c * (x - d) + s * y) for f, x in self.sightings]
+        self.sightings = [(f, carry(x, y, d, delta)[0]) for f, x in self.sightings]
         self.travelled += d
-        self.support = [(f, c * (x - d) + s * y) for f, x in self.support]
+        self.support = [(f, carry(x, y, d, delta)[0]) for f, x in self.support]
 
     @property
     def x(self) -> float:

@@ -12,7 +12,15 @@ import math
 
 import numpy as np
 
-__all__ = ["KalmanConfig", "WeldLineFilter", "robust_line"]
+__all__ = ["KalmanConfig", "WeldLineFilter", "carry", "robust_line"]
+
+
+def carry(x, y, d: float, delta: float):
+    """Wall points (x_r, y_r) seen from the robot after it moved d mm and turned δ rad (CCW +):
+    (cos δ (x − d) + sin δ y, −sin δ (x − d) + cos δ y). Scalars or arrays."""
+    x = x - d
+    c, s = math.cos(delta), math.sin(delta)
+    return c * x + s * y, -s * x + c * y
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,19 +104,12 @@ class WeldLineFilter:
         self.restarts = 0
         self.pending: list[np.ndarray] = []  # rejected centres (x_r, y_r), current frame
 
-    @staticmethod
-    def _carry(p: np.ndarray, d: float, delta: float) -> np.ndarray:
-        """A wall point (x_r, y_r) seen from the robot after it moved d mm and turned δ."""
-        x, y = p[0] - d, p[1]
-        c, s = np.cos(delta), np.sin(delta)
-        return np.array([c * x + s * y, -s * x + c * y])
-
     @property
     def initialised(self) -> bool:
         return self.x is not None
 
     def predict(self, d: float, delta: float) -> None:
-        self.pending = [self._carry(p, d, delta) for p in self.pending]
+        self.pending = [np.array(carry(p[0], p[1], d, delta)) for p in self.pending]
         if self.x is None:
             return
         c = self.c

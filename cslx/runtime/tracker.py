@@ -90,7 +90,7 @@ import numpy as np
 
 from ..config import MOTION
 from .junction_track import JunctionTrack
-from .line_filter import KalmanConfig, WeldLineFilter, robust_line
+from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -342,9 +342,8 @@ class Tracker:
     def _carry_history(self, d: float, delta: float) -> None:
         if not len(self._hist):
             return
-        x, y = self._hist[:, 0] - d, self._hist[:, 1]
-        c, s = math.cos(delta), math.sin(delta)
-        self._hist = np.stack([c * x + s * y, -s * x + c * y, *self._hist[:, 2:].T], 1)
+        x, y = carry(self._hist[:, 0], self._hist[:, 1], d, delta)
+        self._hist = np.stack([x, y, *self._hist[:, 2:].T], 1)
         keep = self._hist[:, 0] >= self.x_ref - self.kalman.heading_window_mm
         self._hist = self._hist[keep]
 
