@@ -50,6 +50,7 @@ from ..segmentation.med_bands import band_snr_scale, first_peak
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
+from .small_ops import window_nanmedian
 from .weld import WeldConfig, WeldFeature, weld_features
 
 __all__ = [
@@ -417,7 +418,7 @@ def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: Pipe
     plane), which lowers the speckle noise of the profile by ≈ √(2·smooth_half+1).
     """
     z = jnp.where(valid, P[:, 2], jnp.nan)
-    med = jnp.nanmedian(_windows(z, config.median_half, jnp.nan), axis=1)
+    med = window_nanmedian(z, config.median_half)  # = nanmedian of the windows, no sort
     keep = valid & (jnp.abs(z - med) <= config.outlier_mm)
     if config.smooth_half > 0:
         w = _windows(keep.astype(P.dtype), config.smooth_half, 0.0)

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cslx.runtime.small_ops import masked_median, solve_spd
+from cslx.runtime.small_ops import masked_median, solve_spd, window_nanmedian
 
 
 def test_masked_median_equals_nanmedian():
@@ -44,3 +44,27 @@ def test_solve_spd_equals_linalg_solve():
             rtol=1e-4,
             atol=1e-6,
         )
+
+
+def test_window_nanmedian_equals_sorted_windows():
+    """Bit for bit `jnp.nanmedian` over the (n, 2k+1) windows of the profile clean-up."""
+    rng = np.random.default_rng(11)
+    f = jax.jit(window_nanmedian, static_argnums=1)
+    for t in range(16):
+        k = (0, 1, 4)[t % 3]
+        n = (1, 5, 480, 640)[t % 4]  # few shapes: one compile each
+        z = rng.standard_normal(n) * 10 ** rng.uniform(-3, 3)
+        if t % 3 == 0:
+            z = np.round(z)  # ties
+        z[rng.random(n) < rng.uniform(0, 1)] = np.nan
+        if t % 4 == 0:
+            z[: n // 3] = np.nan  # windows without any number
+        z = jnp.asarray(z.astype(np.float32))
+        windows = jnp.stack(
+            [jnp.pad(z, (k, k), constant_values=jnp.nan)[j : j + n] for j in range(2 * k + 1)],
+            axis=1,
+        )
+        ref = np.asarray(jnp.nanmedian(windows, axis=1))
+        got = np.asarray(f(z, k))
+        assert got.dtype == ref.dtype
+        np.testing.assert_array_equal(got, ref, err_msg=f"trial {t}, k={k}")
