@@ -86,7 +86,9 @@ averages out): the goal's median is near that floor even without speckle.
    and two centres; sunny vertical 0.42 → 0.73 %, glare vertical 0.16 → 0 %). Without
    speckle and noise p95 0.140 / 0.179 → 0.120 / 0.140 mm (σ 4 px along the path). Flat wall
    (development seeds 41–46, saturated with and without sun): RMS 0.025–0.059 / 0.029–0.069
-   px against 0.029–0.059 / 0.028–0.068 px before, none above 0.07. ≈ 2 ms per stripe.
+   px against 0.029–0.059 / 0.028–0.068 px before, none above 0.07. Cost: the pass alone
+   2.2 ms per stripe (load 6.6); a whole frame and stripe (sunny, H / V, same run, load 13)
+   51.5 / 55.8 → 57.7 / 58.7 ms.
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
