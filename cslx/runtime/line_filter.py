@@ -55,6 +55,11 @@ class KalmanConfig:
     junction_hold: int = 6
     junction_unseen_mm: float = 20.0
     junction_hold_min_support: int = 3
+    # sightings of a crossing weld at x_r within x_ref + this range (where the stripes cross)
+    # do not move a junction that sightings outside it support (`JunctionTrack`, "where the
+    # stripes cross"). Dev seeds 7301, 7302, 7305 (12 rendered approaches from 190 mm, both
+    # placements, sun and clean): TBD
+    junction_crossing_zone_mm: tuple[float, float] = (-30.0, 12.0)
     # A crossing bead lower than this is not a weld: on rendered straight-weld frames the
     # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation
     # artefacts) that the detector took for a crossing bead; weld reinforcement is 1–3 mm.

@@ -333,6 +333,7 @@ class Tracker:
             c.junction_unseen_mm,
             hold_min_support=c.junction_hold_min_support,
             x_min_mm=self.x_ref,
+            crossing_zone=tuple(self.x_ref + z for z in c.junction_crossing_zone_mm),
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
