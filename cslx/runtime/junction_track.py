@@ -70,6 +70,7 @@ class JunctionTrack:
         x_min_mm: float = -math.inf,
         crossing_zone: tuple[float, float] | None = None,
         min_clear: int = 3,
+        keep_clear: int | None = None,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
@@ -77,6 +78,7 @@ class JunctionTrack:
         self.x_min = float(x_min_mm)
         self.zone = None if crossing_zone is None else tuple(map(float, crossing_zone))
         self.min_clear = int(min_clear)
+        self.keep_clear = int(window if keep_clear is None else keep_clear)
         self.stripe_y = 0.0  # y_r of the vertical stripe (mm), from `update`
         self.reset()
 
@@ -112,7 +114,7 @@ class JunctionTrack:
     def _keep_clear(self, sightings: list[tuple[int, float]]) -> None:
         """Add those of `sightings` made outside the zone to `clear` (the last `window`)."""
         new = [(f, x) for f, x in sightings if f in self._made_clear]
-        self.clear = [*self.clear, *new][-self.window :]
+        self.clear = [*self.clear, *new][-self.keep_clear :]
 
     def update(
         self,

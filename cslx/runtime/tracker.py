@@ -70,7 +70,9 @@ the robot at the vertical stripe's y_r), which suppresses single-frame false ala
 three sightings support it, it holds the junction through up to `junction_hold` frames
 without a sighting; a farther confirmed junction replaces a nearer one, and one whose place
 was in view unseen for > 20 mm of travel, or nearer than x_ref (where the horizontal stripe
-still sees the followed weld), is ignored (`cslx.runtime.junction_track.JunctionTrack`).
+still sees the followed weld), is ignored; sightings where the two stripes cross (x_r within
+`junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
+outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -334,6 +336,7 @@ class Tracker:
             hold_min_support=c.junction_hold_min_support,
             x_min_mm=self.x_ref,
             crossing_zone=tuple(self.x_ref + z for z in c.junction_crossing_zone_mm),
+            keep_clear=c.junction_keep_clear,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
