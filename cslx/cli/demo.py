@@ -392,8 +392,7 @@ def _report(
             "CRC-16) along the weld, through the junction turn and onto the crossing weld.",
             "Error: distance from the look-ahead point to the true weld centre line, in",
             "frames where the stripe is on the followed weld and the robot is not turning;",
-            f"`steady_*` leave out the first {SETTLE_S:g} s (the response to the initial "
-            "error).",
+            f"`steady_*` leave out the first {SETTLE_S:g} s (the response to the initial error).",
             "",
             "![closed loop](closed_loop.png)",
             "",

@@ -116,10 +116,11 @@ def run_closed_loop(
         start_offset_mm, start_heading_deg: initial lateral / heading error of the robot.
         turn_rate: the controller's turning rate at the T, rad/s.
         settle_s: the "steady" statistics leave out the first settle_s seconds (the
-            controller's response to the initial error; default `SETTLE_S`, why there): `steady_*` over the rest of the
-            run, `stem_steady_*` over the rest of the stem only; `after_turn_*` cover
-            every counted frame on the crossing weld, the re-acquisition after the turn
-            included (nothing of the turn's transient is left out there).
+            controller's response to the initial error; default `SETTLE_S`, why there):
+            `steady_*` over the rest of the run, `stem_steady_*` over the rest of the
+            stem only; `after_turn_*` cover every counted frame on the crossing weld, the
+            re-acquisition after the turn included (nothing of the turn's transient is
+            left out there).
         after_turn_frames: end the run this many frames after the turn was completed
             (None: run all `n_frames`).
         tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.
