@@ -11,6 +11,7 @@ Nothing here imports the simulation (`cslx.sim`): a robot without a renderer run
   that `cslx track` and the closed-loop simulation both run.
 """
 
+from .batch import process_batch as process_batch
 from .controller import Command as Command
 from .controller import ControllerConfig as ControllerConfig
 from .controller import PathController as PathController
@@ -27,7 +28,6 @@ from .pipeline import PipelineConfig as PipelineConfig
 from .pipeline import PipelineState as PipelineState
 from .pipeline import frame_summary as frame_summary
 from .pipeline import init_state as init_state
-from .pipeline import process_batch as process_batch
 from .pipeline import process_frame as process_frame
 from .protocol import Ack as Ack
 from .protocol import Decoder as Decoder

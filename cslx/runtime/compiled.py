@@ -11,6 +11,19 @@ The file name is a hash of the caller's key (what the program closes over: setti
 values, shapes), the source of the installed cslx package and the JAX version, so an edit
 of the code or an upgrade never reloads a stale program. Without a cache folder it is plain
 ``jax.jit(fn).lower(*args).compile()``.
+
+Where a cached start-up goes (the tracker, 640×480, one fresh process per line, the
+2-core machine at load 5–9, so every figure is inflated ≈ 1.5–2× against a quiet one):
+importing NumPy and JAX 0.55–1.0 s; importing cslx.runtime 0.42–0.5 s (0.65–0.77 s while
+optimistix and lineax were imported with it; now only tracing MED or the undistortion
+loads them, tests/test_architecture.py); loading the cached program 1.0–1.5 s, of which
+XLA's deserialisation of the executable 0.66–0.83 s, lowering the exported call
+0.08–0.1 s and SciPy's LAPACK (`jax.export` initialises it on the CPU) 0.19 s; the first
+frame 0.03–0.07 s. The tracker's reference stripe position and its float32 cast of the
+sensor are computed in NumPy: done eagerly in JAX they compiled (or read from the cache)
+≈ 25 small XLA programs, 0.2–0.5 s at that load. Tried and not adopted:
+``--xla_cpu_parallel_codegen_split_count=1`` (executable load 1.04–1.40 s against
+1.30–1.54 s, three interleaved pairs at load 6–9: not decisive for a process-wide flag).
 """
 
 from __future__ import annotations

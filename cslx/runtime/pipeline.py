@@ -29,9 +29,9 @@ colour sum and the clipped-core fill (``band_first``, `cslx.runtime.band_input`;
 values as the bands of the converted frame), so a tracking frame never converts the whole
 frame.
 
-Everything is pure JAX on one frame and jit-compiled at `process_frame`; `process_batch`
-vmaps it over frames (under vmap `lax.cond` evaluates both branches: archives should use
-the full frame, ``roi=False``).
+Everything is pure JAX on one frame and jit-compiled at `process_frame`;
+`cslx.runtime.batch.process_batch` runs it over a stack of frames (under vmap `lax.cond`
+evaluates both branches: archives should use the full frame, ``roi=False``).
 """
 
 from __future__ import annotations
@@ -47,7 +47,6 @@ from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.med import default_filter_length, initial_filter, med
 from ..segmentation.med_bands import band_snr_scale, first_peak
-from ..segmentation.shard import map_frames, platform_vmap_size
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
@@ -59,7 +58,6 @@ __all__ = [
     "PipelineState",
     "frame_summary",
     "init_state",
-    "process_batch",
     "process_frame",
     "SUMMARY_FIELDS",
     "stripe_points",
@@ -512,39 +510,6 @@ def process_frame(
     rgb = jnp.asarray(rgb)
     _check_frame(sensor, rgb)
     return _process_frame(sensor, config, rgb, state, roi)
-
-
-@functools.partial(jax.jit, static_argnames=("roi", "vmap_size"))
-def _process_batch(sensor, config, frames, state, roi, vmap_size):
-    return map_frames(lambda f: _process(sensor, config, f, state, roi), frames, vmap_size)
-
-
-def process_batch(
-    sensor: Sensor,
-    config: PipelineConfig,
-    frames: UInt8[Array, "f h w 3"],
-    state: PipelineState | None = None,
-    *,
-    roi: bool = False,
-    vmap_size: int | None | str = "auto",
-) -> tuple[FrameResult, PipelineState]:
-    """`process_frame` on independent frames, all starting from the same state.
-
-    For archives of unrelated frames; the results carry a leading frame axis. The default
-    state is `init_state` (cold, flat MED filters) and the full frame is processed.
-    ``vmap_size``: frames vectorised together (`cslx.segmentation.shard.map_frames`); "auto"
-    is one at a time (`lax.map`) on the CPU, where `vmap` made the per-frame cost grow with
-    the batch (99 → 141 ms from 1 to 16 frames, issue 13), and the whole batch elsewhere.
-    """
-    frames = jnp.asarray(frames)
-    if frames.ndim != 4:
-        raise ValueError(f"expected frames of shape (F, H, W, 3), got shape {frames.shape}")
-    _check_frame(sensor, frames[0])
-    if state is None:
-        state = init_state(config, sensor.camera.image_size)
-    if vmap_size == "auto":
-        vmap_size = platform_vmap_size(d.platform for d in frames.devices())
-    return _process_batch(sensor, config, frames, state, roi, vmap_size)
 
 
 #: Names of the entries of `frame_summary`, in order.

@@ -59,7 +59,6 @@ from typing import Literal
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
@@ -241,6 +240,8 @@ def _optimise(image, init, form, axis, rtol, atol, max_steps):
         # Kurtosis is scale-invariant, so the unconstrained problem has the sphere's
         # optima along rays; normalising inside keeps BFGS well-scaled.
         return -kurtosis_objective(w / jnp.linalg.norm(w), image, form, axis)
+
+    import optimistix as optx  # lazy: importing cslx.runtime does not need it
 
     solver = optx.BFGS(rtol=rtol, atol=atol)
     sol = optx.minimise(loss, solver, init / scale, args=image, max_steps=max_steps, throw=False)

@@ -90,7 +90,6 @@ from typing import Literal
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from . import med_fft as _f
@@ -247,6 +246,8 @@ def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma
         pb, loading = args
         W_new, st = _f.update(W, pb, loading, symmetric)
         return W_new, st.ratio_sum
+
+    import optimistix as optx  # lazy: a cached start-up never traces this (runtime.compiled)
 
     solver = optx.FixedPointIteration(rtol=tol, atol=tol * 1e-6, norm=_kurtosis_change)
     y0 = (W0, jnp.zeros((), W0.dtype))

@@ -21,7 +21,6 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
@@ -142,6 +141,8 @@ def undistort(
     xy_d = xy_d.astype(jnp.result_type(float))
     dist = jnp.asarray(dist, dtype=xy_d.dtype)
     tol = _default_tol(out_dtype) if tol is None else tol
+    import optimistix as optx  # lazy: importing cslx.runtime does not need it
+
     solver = optx.FixedPointIteration(rtol=tol, atol=tol)
     sol = optx.fixed_point(
         undistort_step,

@@ -5,12 +5,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cslx.runtime.batch import process_batch
 from cslx.runtime.pipeline import (
     PipelineConfig,
     _process,
     colour_sum,
     init_state,
-    process_batch,
     process_frame,
 )
 from cslx.sensor import default_sensor
@@ -89,7 +89,7 @@ def test_roi_keeps_accuracy_and_batch_equals_frames(scene):
         assert abs(float(full.feature_h.position) - gt["offset_mm"]) < 1.0
     # vmap over frames == frame by frame (full frame, same start state)
     images = np.stack([f[0] for f in frames])
-    batch, _ = process_batch(sensor, config, images)
+    batch, _ = process_batch(sensor, config, images, warm=False)
     for k, one in enumerate(fulls):
         ok = np.asarray(one.centres_h.valid)
         np.testing.assert_allclose(

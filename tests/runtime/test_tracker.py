@@ -40,6 +40,17 @@ def test_compile_logged(tracker):
     assert any("compiled" in line for line in tracker.lines)
 
 
+def test_stripe_x_is_the_triangulated_principal_point(tracker):
+    """x_ref (NumPy, no start-up compiles) equals `triangulate` of (u0, v0) on the wall."""
+    from cslx.sensor import triangulate
+
+    cam = tracker.sensor.camera
+    uv = np.array([[float(cam.u0), float(cam.v0)]])
+    X = np.asarray(triangulate(default_sensor(), uv, 0, robot_frame=True))[0]
+    assert abs(X[2]) < 1e-3  # the point lies on the wall (z_r = 0)
+    assert tracker.x_ref == pytest.approx(float(X[0]), abs=1e-3)
+
+
 def test_offset_and_junction_on_rendered_frames(tracker, frames):
     for kind, img, gt in frames:
         tracker.reset()
