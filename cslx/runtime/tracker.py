@@ -140,7 +140,8 @@ class Observation:
 
     frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
     filtered weld line. bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
-    junction, junction_x_mm: a confirmed crossing weld and its x_r. confidence: [0, 1].
+    junction, junction_x_mm, junction_y_mm: a confirmed crossing weld, its x_r and the y_r
+    where it was measured (the vertical stripe). confidence: [0, 1].
     latency_ms: wall time of `step`. med_steps: MED fixed-point steps (h + v) this frame.
     status: "ok", "no bead", or why the frame was unusable. raw: the pipeline's per-frame
     values (`cslx.runtime.pipeline.SUMMARY_FIELDS`) plus `measured_offset_mm` (this frame's bead
@@ -155,6 +156,7 @@ class Observation:
     bead_height_mm: float = NAN
     junction: bool = False
     junction_x_mm: float = NAN
+    junction_y_mm: float = NAN
     confidence: float = 0.0
     latency_ms: float = NAN
     med_steps: int = 0
@@ -542,3 +544,4 @@ class Tracker:
         if math.isfinite(xj):
             obs.junction = True
             obs.junction_x_mm = xj
+            obs.junction_y_mm = self._junctions.stripe_y
