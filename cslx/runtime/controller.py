@@ -43,8 +43,9 @@ the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm 
 sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
 junction distance x_j along the robot's axis (a sighting x on the vertical stripe, at y_r =
 y_v, plus y_v · tan θ: the crossing weld is perpendicular to the followed one, whose heading
-is θ; without it a 1.1° heading left the robot 0.8 mm past the T in Figure 22's sunny run
-at dev seed 2203) is dead-reckoned (x_j −= v dt) between sightings and reset by each
+is θ; taking the sighting as the axis distance, the robots of Figure 22's sunny runs at dev
+seeds 2201 and 2203, 0.9° and 1.1° off the stem, came to rest 1.44 and 1.32 mm past the T,
+with it −0.06 and −0.18 mm) is dead-reckoned (x_j −= v dt) between sightings and reset by each
 sighting that agrees with it within `junction_gate_mm` (issue 12: in rendered sunlight a stray
 report where the stripes cross, 42 mm from the truth, pushed the turn past the T), or by
 three rejected sightings in a row that agree with each other (the first sighting was the
