@@ -62,11 +62,34 @@ out; 41–42 were used in development): undistorted centres scatter 0.030–0.04
 straight line horizontally, 0.020–0.072 px vertically (one of 8 above 0.07), largest
 distance 0.37 px; MED + Steger 0.12–63 px.
 
-Missed goals of issue 11: median ≤ 0.03 mm and p95 ≤ 0.1 mm. The error left is laser speckle
-(contrast 0.5, ≈ 1 px grain; on a clean rendered scene the median is 0.08 px with speckle and
-0.01 px without before path smoothing) and, for the p95, the bead's corners, which the 6 px
-smoothing along the stripe rounds before the path is formed (a shorter smoothing lost
-detection; `cslx.segmentation.path`). Cost per frame and stripe, warm, horizontal / vertical,
+Missed goals of issue 11: median ≤ 0.03 mm and p95 ≤ 0.1 mm. Where the error lies
+(development frames, seeds 7100–7117, 2 frames × 18 conditions, before the second pass,
+H / V): plate columns (≈ 79 % of the centres) median 0.034 / 0.041 mm, p95 0.129 / 0.147;
+bead cap 0.097 / 0.100, p95 0.29 / 0.44; ±8 px around the bead's corners (2–4 %) 0.18 / 0.20,
+p95 0.51 / 0.58; the crossing 0.045 / 0.040; the outer 12 columns 0.072 / 0.121. The same
+frames rendered without speckle: median 0.020 / 0.025 mm, p95 0.133 / 0.149; without
+speckle and sensor noise: 0.018 / 0.026, p95 0.140 / 0.179 (bead 0.066 / 0.059, corners
+0.117 / 0.134). So the median is set by speckle (0.020 → 0.039 mm H), the p95 by biases that
+no noise reduction removes: the corners and the bead cap (the smoothing along the image axis
+bends a curved path towards its chord), sunlit backgrounds under the profile, and the border.
+An oracle that measures each column of the noise-free laser-only image (the frame minus
+the same frame with the laser off) around the true row with σ 2.5 px and no smoothing
+along the stripe scores, on the clean scenes, median 0.020 / 0.030 mm and p95 0.068 /
+0.092 mm (sampling bias of a ≈ 1 px wide profile, which smoothing along a tilted stripe
+averages out): the goal's median is near that floor even without speckle.
+7. Second pass (`_second`, `cslx.segmentation.refine`): the centres are re-measured around
+   the smoothed path, with the smoothing (`SIGMA_REFINE`) along the path instead of the
+   image axis, then smoothed again. Development frames, H / V: p95 0.190 / 0.224 →
+   0.173 / 0.198 mm (corners median 0.176 / 0.201 → 0.136 / 0.168 mm, bead 0.097 / 0.100 →
+   0.083 / 0.092, border p95 0.270 / 0.492 → 0.187 / 0.330), median 0.039 / 0.046 mm
+   unchanged, detection unchanged (100 / 99.90 %), gross 0.00 / 0.07 → 0.01 / 0.08 % (one
+   and two centres; sunny vertical 0.42 → 0.73 %, glare vertical 0.16 → 0 %). Without
+   speckle and noise p95 0.140 / 0.179 → 0.120 / 0.140 mm (σ 4 px along the path). Flat wall
+   (development seeds 41–46, saturated with and without sun): RMS 0.025–0.059 / 0.029–0.069
+   px against 0.029–0.059 / 0.028–0.068 px before, none above 0.07. Cost: the pass alone
+   2.2 ms per stripe (load 6.6); a whole frame and stripe (sunny, H / V, same run, load 13)
+   51.5 / 55.8 → 57.7 / 58.7 ms.
+Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
 path smoothing alone ≈ 1 ms per stripe); ≈ 700 ms before the column-profile rework.
@@ -360,13 +383,16 @@ def linked_extract(
         blind = filled
     sa = SIGMA_ALONG
     first = SIGMA0 if sigma is None else float(sigma)
+    final = first
     c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params, sigma_along=sa)
     if sigma is None:
         # The first pass at the floor σ is final unless the measured width asks for more.
         final = stripe_sigma(width)
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
-    pos, valid, sig, sat = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
+    pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
+    if REFINE:
+        pos = _second(mono, pos, valid, bridged, sigma=final, axis=axis)
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )
@@ -398,7 +424,36 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
         sig = jnp.where(valid, sig * jnp.maximum(factor, 1.0), sig)
     near = jnp.clip(jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32), 0, f.shape[0] - 1)
     sat = (f[near, jnp.arange(f.shape[1])] & valid) | bridged
-    return pos, valid, sig, sat
+    return pos, valid, sig, sat, bridged
+
+
+#: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
+REFINE = True
+#: Smoothing along the path (px) of the second pass. Development frames (seeds 7100–7117,
+#: 2 frames × 18 conditions, H / V p95 mm; without the second pass 0.190 / 0.224): with the
+#: first pass's 9 px border margin 0 / 2 / 3 / 4 / 6 px → 0.283 / 0.322 (gross 0.12 / 0.29 %),
+#: 0.220 / 0.250, 0.207 / 0.230, 0.195 / 0.220, 0.180 / 0.203; without it (as used) 6 / 8 px →
+#: 0.173 / 0.198 and 0.171 / 0.198, medians 0.039 / 0.046 and 0.041 / 0.048 mm.
+SIGMA_REFINE = 6.0
+
+
+@functools.partial(jax.jit, static_argnames=("sigma", "axis"))
+def _second(mono, pos, valid, bridged, *, sigma: float, axis: int):
+    """Second pass (module docstring, step 7): centres re-measured along the first pass's
+    smoothed path (`refine.refine_centres`), then smoothed again (`path.smooth_path`).
+
+    Bridged centres keep the first pass's line. No border margin: the smoothing along the
+    path is normalised over the centres it has, so it does not mirror the image at the
+    border (development frames, border centres H / V p95 0.276 / 0.497 mm with the first
+    pass's 9 px margin, 0.187 / 0.330 mm without)."""
+    from .refine import refine_centres
+
+    use = valid & ~bridged
+    new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis)
+    new = jnp.where(use, new, pos)
+    scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
+    smoothed, _ = smooth_path(jnp.nan_to_num(new), valid, scatter, support=use)
+    return jnp.where(use, smoothed, pos)
 
 
 #: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.

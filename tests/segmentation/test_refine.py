@@ -1,0 +1,60 @@
+"""Second pass of the linked detector (cslx.segmentation.refine)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cslx.segmentation.refine import REACH, refine_centres
+
+
+def _curved(h=240, w=320, s=1.2):
+    """A bright horizontal stripe on a parabola with a bend: (image, truth per column)."""
+    u = np.arange(w, dtype=float)
+    truth = 120.0 + 0.004 * (u - 160.0) ** 2 / 2 - 0.08 * np.maximum(u - 220.0, 0.0)
+    v = np.arange(h, dtype=float)[:, None]
+    image = 10.0 + 200.0 * np.exp(-0.5 * ((v - truth[None, :]) / s) ** 2)
+    return image.astype(np.float32), truth
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_measures_along_the_path_without_chord_bias(axis):
+    image, truth = _curved()
+    mono = image if axis == 0 else image.T
+    # A first pass that is off by a constant 0.4 px: the smoothing along the path averages
+    # profiles at the same offset from it, so the curved path is not bent towards its chord
+    # (smoothing 6 px along the image axis would bias it by c''σ²/2 ≈ 0.07 px).
+    start = jnp.asarray(truth + 0.4, jnp.float32)
+    valid = jnp.ones(len(truth), bool)
+    pos, found = refine_centres(
+        jnp.asarray(mono), start, valid, sigma=2.5, sigma_along=6.0, axis=axis
+    )
+    pos, found = np.asarray(pos), np.asarray(found)
+    inner = slice(20, -20)
+    assert found.all()
+    assert np.abs(pos[inner] - truth[inner]).max() < 0.02
+    assert np.abs(np.asarray(start)[inner] - truth[inner]).min() > 0.39
+
+
+def test_keeps_invalid_and_unfound_centres():
+    image, truth = _curved()
+    n = len(truth)
+    start = truth.copy()
+    start[:40] += REACH + 8.0  # no ridge within reach of these
+    valid = np.ones(n, bool)
+    valid[100:110] = False
+    pos, found = refine_centres(
+        jnp.asarray(image),
+        jnp.asarray(start, jnp.float32),
+        jnp.asarray(valid),
+        sigma=2.5,
+        sigma_along=0.0,
+        axis=0,
+    )
+    pos, found = np.asarray(pos), np.asarray(found)
+    assert not found[:40].any() and not found[100:110].any()
+    np.testing.assert_allclose(pos[:40], start[:40], rtol=0, atol=1e-4)
+    np.testing.assert_allclose(pos[100:110], start[100:110], rtol=0, atol=1e-4)
+    assert found[50:100].all()
+    assert np.abs(pos[50:100] - truth[50:100]).max() < 0.02
