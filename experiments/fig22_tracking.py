@@ -32,9 +32,7 @@ DEFAULTS = dict(
     start_offset_mm=4.0,
     start_heading_deg=3.0,
     turn_rate=0.5,
-    # the start transient: the designed start error (4 mm, 3°: 11.85 mm at the look-ahead
-    # point) fell below 0.5 mm after 1.1 s in the clean and sunny runs at fb7bf8c; the stem
-    # is left ≈ 2.3 s after the start, so the former 5 s left no stem frame in `steady_*`
+    # the start transient left out of `steady_*` (cslx.sim.closed_loop.SETTLE_S says why)
     settle_s=1.5,
     after_turn_frames=40,
 )

@@ -311,6 +311,7 @@ def _report(
 
     from ..files import atomic_write
     from ..provenance import md_table, provenance, provenance_md
+    from ..sim.closed_loop import SETTLE_S
 
     lines = ["# cslx demo report", ""]
     lines += [
@@ -391,7 +392,7 @@ def _report(
             "CRC-16) along the weld, through the junction turn and onto the crossing weld.",
             "Error: distance from the look-ahead point to the true weld centre line, in",
             "frames where the stripe is on the followed weld and the robot is not turning;",
-            "`steady_*` leave out the first 5 s (the response to the initial error).",
+            f"`steady_*` leave out the first {SETTLE_S:g} s (the response to the initial error).",
             "",
             "![closed loop](closed_loop.png)",
             "",

@@ -55,6 +55,20 @@ class KalmanConfig:
     junction_hold: int = 6
     junction_unseen_mm: float = 20.0
     junction_hold_min_support: int = 3
+    # sightings of a crossing weld at x_r within x_ref + this range (where the stripes cross)
+    # do not move a junction that sightings outside it support; its position is the median
+    # of the last `junction_keep_clear` sightings made outside (`JunctionTrack`, "where the
+    # stripes cross"). Dev seeds 7301, 7302, 7305, 12 rendered approaches from x_j = 190 mm
+    # (beside and flank, sun and clean; the stored sequences end at 164 mm, before the zone):
+    # sightings at 140–145 mm were 3.9 mm too far on average (1.3 mm at 145–150), elsewhere
+    # −1.4 to +0.9 mm by 5 mm bin. Reported junction, mean error / max |error|, without →
+    # with (−40, 12) and 30 kept: x_j 120–140 mm 0.76 / 2.01 → 0.08 / 1.11, 140–150 mm
+    # 0.52 / 1.86 → 0.19 / 1.12, 150–160 mm −0.27 / 1.84 → 0.25 / 1.06, beyond 160 mm
+    # unchanged; the last report (what the controller dead-reckons to the T from) ≤ 1.83 →
+    # ≤ 0.89 mm off. (−30, 10): 140–150 mm 0.05 / 1.12 but a last report 0.97 mm off; 10
+    # kept instead of 30 (9 of the approaches): a last report 1.24 mm off
+    junction_crossing_zone_mm: tuple[float, float] = (-40.0, 12.0)
+    junction_keep_clear: int = 30
     # A crossing bead lower than this is not a weld: on rendered straight-weld frames the
     # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation
     # artefacts) that the detector took for a crossing bead; weld reinforcement is 1–3 mm.

@@ -70,7 +70,9 @@ the robot at the vertical stripe's y_r), which suppresses single-frame false ala
 three sightings support it, it holds the junction through up to `junction_hold` frames
 without a sighting; a farther confirmed junction replaces a nearer one, and one whose place
 was in view unseen for > 20 mm of travel, or nearer than x_ref (where the horizontal stripe
-still sees the followed weld), is ignored (`cslx.runtime.junction_track.JunctionTrack`).
+still sees the followed weld), is ignored; sightings where the two stripes cross (x_r within
+`junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
+outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -138,7 +140,8 @@ class Observation:
 
     frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
     filtered weld line. bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
-    junction, junction_x_mm: a confirmed crossing weld and its x_r. confidence: [0, 1].
+    junction, junction_x_mm, junction_y_mm: a confirmed crossing weld, its x_r and the y_r
+    where it was measured (the vertical stripe). confidence: [0, 1].
     latency_ms: wall time of `step`. med_steps: MED fixed-point steps (h + v) this frame.
     status: "ok", "no bead", or why the frame was unusable. raw: the pipeline's per-frame
     values (`cslx.runtime.pipeline.SUMMARY_FIELDS`) plus `measured_offset_mm` (this frame's bead
@@ -153,6 +156,7 @@ class Observation:
     bead_height_mm: float = NAN
     junction: bool = False
     junction_x_mm: float = NAN
+    junction_y_mm: float = NAN
     confidence: float = 0.0
     latency_ms: float = NAN
     med_steps: int = 0
@@ -342,6 +346,8 @@ class Tracker:
             c.junction_unseen_mm,
             hold_min_support=c.junction_hold_min_support,
             x_min_mm=self.x_ref,
+            crossing_zone=tuple(self.x_ref + z for z in c.junction_crossing_zone_mm),
+            keep_clear=c.junction_keep_clear,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
@@ -538,3 +544,4 @@ class Tracker:
         if math.isfinite(xj):
             obs.junction = True
             obs.junction_x_mm = xj
+            obs.junction_y_mm = self._junctions.stripe_y

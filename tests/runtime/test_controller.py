@@ -388,3 +388,24 @@ def test_turn_squares_to_the_crossing_weld(direction):
     assert ctrl.turns_completed == 1
     assert math.degrees(turned) == pytest.approx(direction * 90.0 + 2.0, abs=0.6)
     assert travelled == pytest.approx(x_j, abs=1.0)  # at rest on the T, not past it
+
+
+@pytest.mark.parametrize("heading_deg", [-2.0, 1.5])
+def test_junction_distance_is_taken_along_the_robot_axis(heading_deg):
+    """A crossing weld perpendicular to a weld at heading θ, sighted on the vertical stripe
+    (y_r = −39 mm) at x_v, meets the robot's axis at x_v − 39 tan θ: the robot turns there."""
+    th = math.radians(heading_deg)
+    ctrl = PathController(ControllerConfig())
+    for _ in range(40):  # follow the weld (its heading known)
+        ctrl.update(0.05, 0.0, heading_deg, 0.9)
+    ctrl.update(
+        0.05, 0.0, heading_deg, 0.9, junction=True, junction_x_mm=100.0, junction_y_mm=-39.0
+    )
+    v = ctrl.v
+    assert ctrl.junction_x == pytest.approx(100.0 - 39.0 * math.tan(th) - v * 0.05, abs=1e-6)
+    # without the stripe's y_r (older callers) the sighting is taken as it is
+    plain = PathController(ControllerConfig())
+    for _ in range(40):
+        plain.update(0.05, 0.0, heading_deg, 0.9)
+    plain.update(0.05, 0.0, heading_deg, 0.9, junction=True, junction_x_mm=100.0)
+    assert plain.junction_x == pytest.approx(100.0 - plain.v * 0.05, abs=1e-6)

@@ -120,3 +120,27 @@ def test_no_new_junction_nearer_than_the_followed_weld():
     bar = lambda k: 156.0 - 1.5 * k  # noqa: E731
     out = _run(JunctionTrack(10, 6.0, hold=6, x_min_mm=150.0), [bar] * 8)
     assert out[7] == pytest.approx(bar(7), abs=0.01) and bar(7) < 150.0
+
+
+def test_sightings_where_the_stripes_cross_do_not_move_a_held_junction():
+    """A bar fixed on the plate, sighted every frame; inside the crossing zone (x_r 120–162
+    mm) the sightings are 3 mm too far (the other stripe disturbs the profile there): the
+    held position stays on the bar, which it does not without the zone."""
+    bar = lambda k: 200.0 - 1.5 * k  # noqa: E731
+
+    def seen(k):
+        return bar(k) + (3.0 if 120.0 <= bar(k) <= 162.0 else 0.0)
+
+    zoned = _run(JunctionTrack(10, 6.0, hold=6, crossing_zone=(120.0, 162.0)), [seen] * 50)
+    plain = _run(JunctionTrack(10, 6.0, hold=6), [seen] * 50)
+    for k in range(1, 50):
+        assert zoned[k] == pytest.approx(bar(k), abs=0.01), k
+    assert plain[49] - bar(49) == pytest.approx(3.0, abs=0.01)
+    # inside the zone the sightings still hold it: reported through 12 frames of them
+    assert bar(49) < 127.0 and math.isfinite(zoned[49])
+
+
+def test_a_junction_first_seen_inside_the_zone_is_placed_by_those_sightings():
+    bar = lambda k: 140.0 - 1.5 * k  # noqa: E731
+    out = _run(JunctionTrack(10, 6.0, hold=6, crossing_zone=(120.0, 162.0)), [bar] * 4)
+    assert out[3] == pytest.approx(bar(3), abs=0.01)

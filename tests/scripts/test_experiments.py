@@ -122,3 +122,16 @@ def test_tracking_sequence_verdicts_name_the_worst_run():
     assert "1 of 2 | 0.8 (beside sunny 1)" in by_goal["heading error mean ≤ 0.5°"]
     assert "1 of 2 | 2 (beside sunny 1)" in by_goal["no T reported where it is not"]
     assert by_goal["offset error max ≤ 1 mm"].endswith("**met** |")
+
+
+def test_figure22_and_the_demo_leave_out_the_same_start_transient():
+    """One documented default (`SETTLE_S`) for run_closed_loop, Figure 22 and the demo."""
+    import inspect
+
+    from cslx.sim.closed_loop import SETTLE_S, run_closed_loop
+    from experiments.fig22_tracking import DEFAULTS
+
+    assert inspect.signature(run_closed_loop).parameters["settle_s"].default == SETTLE_S
+    assert DEFAULTS["settle_s"] == SETTLE_S
+    demo = (EXPERIMENTS.parent / "cslx" / "cli" / "demo.py").read_text(encoding="utf-8")
+    assert "leave out the first 5 s" not in demo and "SETTLE_S" in demo
