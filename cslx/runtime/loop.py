@@ -205,7 +205,7 @@ class TrackingLoop:
             obs.junction_x_mm,
             robot_heading_rad=heading,
             sensor_ok=obs.stripe_ok,
-            junction_y_mm=getattr(obs, "junction_y_mm", 0.0),
+            junction_y_mm=obs.junction_y_mm,
         )
         sent = False
         if self.link is not None:

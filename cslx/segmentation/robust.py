@@ -107,6 +107,7 @@ import numpy as np
 from jax import lax
 
 from .path import smooth_path
+from .refine import refine_centres
 from .ridges import PATH_HALF_WINDOW, LinkParams, _path_scatter, linked_centres
 from .steger import Centres
 
@@ -446,11 +447,9 @@ def _second(mono, pos, valid, bridged, *, sigma: float, axis: int):
     path is normalised over the centres it has, so it does not mirror the image at the
     border (development frames, border centres H / V p95 0.276 / 0.497 mm with the first
     pass's 9 px margin, 0.187 / 0.330 mm without)."""
-    from .refine import refine_centres
-
     use = valid & ~bridged
+    # refine_centres keeps `pos` wherever `use` is False or nothing was found
     new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis)
-    new = jnp.where(use, new, pos)
     scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
     smoothed, _ = smooth_path(jnp.nan_to_num(new), valid, scatter, support=use)
     return jnp.where(use, smoothed, pos)
