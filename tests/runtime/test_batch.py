@@ -7,18 +7,12 @@ import pytest
 from cslx.runtime.batch import process_batch
 from cslx.runtime.pipeline import PipelineConfig
 from cslx.sensor import default_sensor
-from cslx.sim import random_pose, random_world, render_frame
 
 
 @pytest.fixture(scope="module")
-def batches():
+def batches(render_scenes):
     sensor = default_sensor(jnp.float32)
-    images = []
-    for i, kind in enumerate(("cross", "straight")):
-        rng = np.random.default_rng([37, i])
-        world = random_world(kind, rng)
-        pose = random_pose(world, kind, rng, sensor)
-        images.append(render_frame(sensor, world, pose, "clean", seed=i)[0])
+    images = [img for img, _ in render_scenes(sensor, ("cross", "straight"), 37)]
     # The first frame twice (a warm start on the same image), then an unrelated scene.
     frames = np.stack([images[0], images[0], images[1]])
     config = PipelineConfig(L_v=240)  # as tests/runtime/test_pipeline.py: cheaper in tests

@@ -14,18 +14,12 @@ from cslx.runtime.pipeline import (
     process_frame,
 )
 from cslx.sensor import default_sensor
-from cslx.sim import random_pose, random_world, render_frame
 
 
 @pytest.fixture(scope="module")
-def scene():
+def scene(render_scenes):
     sensor = default_sensor(jnp.float32)
-    frames = []
-    for i, kind in enumerate(("cross", "straight")):
-        rng = np.random.default_rng([31, i])
-        world = random_world(kind, rng)
-        pose = random_pose(world, kind, rng, sensor)
-        frames.append(render_frame(sensor, world, pose, "clean", seed=i))
+    frames = render_scenes(sensor, ("cross", "straight"), 31)
     # L_v = 240 keeps the full-frame vertical MED at the horizontal one's cost in tests.
     return sensor, PipelineConfig(L_v=240), frames
 

@@ -9,7 +9,6 @@ import pytest
 from cslx.runtime.line_filter import KalmanConfig, WeldLineFilter
 from cslx.runtime.tracker import Tracker
 from cslx.sensor import default_sensor
-from cslx.sim import random_pose, random_world, render_frame
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
@@ -23,16 +22,10 @@ def tracker():
 
 
 @pytest.fixture(scope="module")
-def frames():
-    sensor = default_sensor()
-    out = []
-    for i, kind in enumerate(("straight", "cross", "cross")):
-        rng = np.random.default_rng([41, i])
-        world = random_world(kind, rng)
-        pose = random_pose(world, kind, rng, sensor)
-        img, gt = render_frame(sensor, world, pose, "clean", seed=i)
-        out.append((kind, img, gt))
-    return out
+def frames(render_scenes):
+    kinds = ("straight", "cross", "cross")
+    scenes = render_scenes(default_sensor(), kinds, 41)
+    return [(kind, img, gt) for kind, (img, gt) in zip(kinds, scenes, strict=True)]
 
 
 def test_compile_logged(tracker):
