@@ -103,7 +103,10 @@ averages out): the goal's median is near that floor even without speckle.
    (V p95 0.298); subtracting the line through the profile's outer taps (H median 0.039, p95
    0.167). Speckle remains the limit: the clean development frames re-rendered without
    speckle score median 0.006–0.016 mm, p95 0.040–0.072 mm (4 frames); without texture,
-   about as with it.
+   about as with it. Flat wall (seeds 41–46): RMS 0.025–0.059 / 0.029–0.069 →
+   0.027–0.056 / 0.027–0.069 px (mean 0.045 → 0.043), largest distance 0.250 → 0.242 px.
+   Cost (sunny and clean frames, same run, load 15.8): 75.7 / 79.9 → 79.5 / 85.3 ms per
+   frame and stripe.
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
