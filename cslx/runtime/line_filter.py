@@ -37,6 +37,9 @@ class KalmanConfig:
     reset_after: int = 3  # mutually consistent rejected measurements in a row → restart
     consistent_mm: float = 1.0  # half their spread (max − min) at x_ref, mm
     give_up_after: int = 8  # rejected measurements in a row that restart it regardless
+    # a restart takes its heading from the rejected centres when they span this much and
+    # contradict the current heading (`WeldLineFilter._restart_heading`); 0: keep the heading
+    restart_heading_span_mm: float = 5.0
     heading_valid_deg: float = 3.0
     decay: float = 0.85  # confidence per frame without a bead
     junction_window: int = 10
@@ -132,10 +135,13 @@ class WeldLineFilter:
         Q = np.diag([c.q_offset**2, c.q_heading**2]) * abs(d) + c.q_floor * np.eye(2)
         self.P = F @ self.P @ F.T + Q
 
-    def start(self, y: float, theta: float = 0.0) -> None:
+    def start(self, y: float, theta: float = 0.0, theta_std: float | None = None) -> None:
+        """(Re)start at offset y, heading θ; heading standard deviation `init_heading_std`
+        unless given."""
         c = self.c
+        sd = c.init_heading_std if theta_std is None else theta_std
         self.x = np.array([y, theta])
-        self.P = np.diag([c.init_offset_std**2, c.init_heading_std**2])
+        self.P = np.diag([c.init_offset_std**2, sd**2])
         self.rejected = 0
         self.pending = []
 
@@ -147,11 +153,51 @@ class WeldLineFilter:
         at_ref = recent[:, 1] - np.tan(theta) * (recent[:, 0] - self.x_ref)
         agree = len(recent) >= c.reset_after and np.ptp(at_ref) <= 2.0 * c.consistent_mm
         if agree or self.rejected >= c.give_up_after:
+            new, sd = self._restart_heading(np.array(self.pending), theta)
+            if new == theta:
+                new, sd = self._restart_heading(recent, theta)
+            if new != theta:
+                theta = new
+                at_ref = recent[:, 1] - np.tan(theta) * (recent[:, 0] - self.x_ref)
             y = float(np.mean(at_ref)) if agree else float(at_ref[-1])
-            self.start(y, theta)
+            self.start(y, theta, sd)
             self.restarts += 1
             return True
         return False
+
+    def _restart_heading(self, points: np.ndarray, theta: float) -> tuple[float, float | None]:
+        """The heading to restart with and its standard deviation (None: `init_heading_std`):
+        the current heading, unless the rejected centres (carried
+        by odometry) lie on a line whose direction contradicts it (`KalmanConfig`,
+        `restart_heading_span_mm`).
+
+        After an in-place turn onto a new weld the centres trace that weld while the filter's
+        heading is the old weld's (90° off): restarting with it made the prediction
+        e' = e + d θ drift by up to 2.7 mm over the first frames along the new weld. The line
+        is the principal direction of the points; its standard deviation is σ / √Σ s² (s the
+        points' positions along it, σ the larger of their RMS distance from it and
+        `sigma_meas`); it replaces θ when they span ≥ `restart_heading_span_mm`, lie within
+        `consistent_mm` RMS of the line, and differ from θ (modulo 180°) by more than `gate`
+        standard deviations of the two combined.
+        """
+        c = self.c
+        keep = (theta, None)
+        if c.restart_heading_span_mm <= 0 or len(points) < 3:
+            return keep
+        q = points - points.mean(axis=0)
+        _, sv, vt = np.linalg.svd(q, full_matrices=False)
+        s = q @ vt[0]
+        rms = float(sv[1]) / math.sqrt(len(points))
+        if np.ptp(s) < c.restart_heading_span_mm or rms > c.consistent_mm:
+            return keep
+        phi = math.atan2(vt[0][1], vt[0][0])
+        delta = (phi - theta + math.pi / 2) % math.pi - math.pi / 2
+        sd = max(rms, c.sigma_meas) / math.sqrt(float(s @ s))
+        p_theta = float(self.P[1, 1]) if self.x is not None else c.init_heading_std**2
+        if delta * delta <= c.gate**2 * (sd * sd + p_theta):
+            return keep
+        sd = max(sd, math.radians(c.sigma_heading_floor_deg))
+        return (phi + math.pi / 2) % math.pi - math.pi / 2, sd  # the line's direction, |θ| ≤ 90°
 
     def update_heading(self, theta: float, sd: float) -> bool:
         """Fuse a direct heading measurement (rad, its standard deviation rad); gated."""
