@@ -39,7 +39,7 @@ class KalmanConfig:
     give_up_after: int = 8  # rejected measurements in a row that restart it regardless
     # a restart takes its heading from the rejected centres when they span this much and
     # contradict the current heading (`WeldLineFilter._restart_heading`); 0: keep the heading
-    restart_heading_span_mm: float = 5.0
+    restart_heading_span_mm: float = 2.0
     heading_valid_deg: float = 3.0
     decay: float = 0.85  # confidence per frame without a bead
     junction_window: int = 10
@@ -154,8 +154,6 @@ class WeldLineFilter:
         agree = len(recent) >= c.reset_after and np.ptp(at_ref) <= 2.0 * c.consistent_mm
         if agree or self.rejected >= c.give_up_after:
             new, sd = self._restart_heading(np.array(self.pending), theta)
-            if new == theta:
-                new, sd = self._restart_heading(recent, theta)
             if new != theta:
                 theta = new
                 at_ref = recent[:, 1] - np.tan(theta) * (recent[:, 0] - self.x_ref)
@@ -166,29 +164,35 @@ class WeldLineFilter:
         return False
 
     def _restart_heading(self, points: np.ndarray, theta: float) -> tuple[float, float | None]:
-        """The heading to restart with and its standard deviation (None: `init_heading_std`):
-        the current heading, unless the rejected centres (carried
-        by odometry) lie on a line whose direction contradicts it (`KalmanConfig`,
-        `restart_heading_span_mm`).
+        """The heading to restart with and its standard deviation (None: `init_heading_std`).
 
-        After an in-place turn onto a new weld the centres trace that weld while the filter's
-        heading is the old weld's (90° off): restarting with it made the prediction
-        e' = e + d θ drift by up to 2.7 mm over the first frames along the new weld. The line
-        is the principal direction of the points; its standard deviation is σ / √Σ s² (s the
-        points' positions along it, σ the larger of their RMS distance from it and
-        `sigma_meas`); it replaces θ when they span ≥ `restart_heading_span_mm`, lie within
-        `consistent_mm` RMS of the line, and differ from θ (modulo 180°) by more than `gate`
-        standard deviations of the two combined.
+        The current heading θ, unless the rejected centres `points` (carried into the
+        current robot frame by odometry; the longest recent run of them that lies on one
+        line) lie on a line whose direction contradicts it. During the in-place turn at a T
+        the centres trace the crossing weld while θ is still the old weld's, ≈ 90° off;
+        restarting with that θ made the prediction e' = e + d·θ run off along the new weld
+        (module `cslx.runtime.tracker`; numbers in `KalmanConfig`).
+
+        The line is the points' principal direction; its standard deviation is σ / √Σ s²
+        (s the points' positions along it, σ the larger of their RMS distance from it and
+        `sigma_meas`, at least `sigma_heading_floor_deg`). It replaces θ when the points
+        span ≥ `restart_heading_span_mm` along it, lie within `consistent_mm` RMS of it, and
+        differ from θ (modulo 180°) by more than `gate` standard deviations of the two
+        combined; a lateral jump on a straight pass (three centres 3 mm apart along the
+        weld) keeps θ.
         """
         c = self.c
         keep = (theta, None)
-        if c.restart_heading_span_mm <= 0 or len(points) < 3:
+        if c.restart_heading_span_mm <= 0:
             return keep
-        q = points - points.mean(axis=0)
-        _, sv, vt = np.linalg.svd(q, full_matrices=False)
-        s = q @ vt[0]
-        rms = float(sv[1]) / math.sqrt(len(points))
-        if np.ptp(s) < c.restart_heading_span_mm or rms > c.consistent_mm:
+        for k in range(len(points), 2, -1):  # the longest recent run on one line
+            q = points[-k:] - points[-k:].mean(axis=0)
+            _, sv, vt = np.linalg.svd(q, full_matrices=False)
+            s = q @ vt[0]
+            rms = float(sv[1]) / math.sqrt(k)
+            if np.ptp(s) >= c.restart_heading_span_mm and rms <= c.consistent_mm:
+                break
+        else:
             return keep
         phi = math.atan2(vt[0][1], vt[0][0])
         delta = (phi - theta + math.pi / 2) % math.pi - math.pi / 2
