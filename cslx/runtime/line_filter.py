@@ -38,7 +38,15 @@ class KalmanConfig:
     consistent_mm: float = 1.0  # half their spread (max − min) at x_ref, mm
     give_up_after: int = 8  # rejected measurements in a row that restart it regardless
     # a restart takes its heading from the rejected centres when they span this much and
-    # contradict the current heading (`WeldLineFilter._restart_heading`); 0: keep the heading
+    # contradict the current heading (`WeldLineFilter._restart_heading`); 0: keep the heading.
+    # Figure 22's closed loop, sunny, dev seeds 2201 / 2203 / 2204 (`experiments/
+    # fig22_tracking.py`), error after the turn mean keeping the heading → with: 0.356 →
+    # 0.280, 0.258 → 0.070, 0.529 → 0.195 mm (max 0.810 → 0.715, 0.516 → 0.164, 1.103 →
+    # 0.296); stem unchanged; 2204 shadow 0.385 → 0.204. With the old heading (≈ 90° off
+    # after re-acquiring the bar during the turn) the estimate ran 2.7 mm off over the first
+    # 10 frames on the bar at 2204. 44 dev tracking sequences (7301, 7302, 7305, 1201–1203):
+    # identical. A 5 mm span over all pending centres missed the restart at 2204 (the first
+    # centres, at the field's edge, were off the line), hence the longest recent run
     restart_heading_span_mm: float = 2.0
     heading_valid_deg: float = 3.0
     decay: float = 0.85  # confidence per frame without a bead
