@@ -45,8 +45,8 @@ class KalmanConfig:
     # 0.296); stem unchanged; 2204 shadow 0.385 → 0.204. With the old heading (≈ 90° off
     # after re-acquiring the bar during the turn) the estimate ran 2.7 mm off over the first
     # 10 frames on the bar at 2204. 44 dev tracking sequences (7301, 7302, 7305, 1201–1203):
-    # identical. A 5 mm span over all pending centres missed the restart at 2204 (the first
-    # centres, at the field's edge, were off the line), hence the longest recent run
+    # identical. A first version (span ≥ 5 mm, all pending centres or else the last 3) left
+    # the closed loop at 2201 and 2204 unchanged: it never replaced the heading there
     restart_heading_span_mm: float = 2.0
     heading_valid_deg: float = 3.0
     decay: float = 0.85  # confidence per frame without a bead
