@@ -73,14 +73,24 @@ class PipelineConfig(eqx.Module):
     weights: colour weights (w_r, w_g, w_b) of eq. (8); default R − G (the paper's space).
     L_h / L_v: full-frame MED filter lengths for the horizontal (down columns) and vertical
         (along rows) stripe; None = 50 % of the segment (the paper's choice, correction 7).
-    L_roi: MED filter length inside the tracking bands (≤ the band size). 16, even: tried
-        and dropped 17 (issue 13), whose whole-sample delay (L − 1)/2 lets `med` read the
-        band output as a slice of the convolution (`cslx.segmentation.med_fft.centre_output`)
-        instead of one more Fourier shift per stripe (≈ 30 % of band MED's time in one
-        interleaved run): on dev video (seeds 0 / 1 / 3) band − full-frame centres were
-        0.023 / 0.010 / 0.014 px (16: 0.025 / 0.010 / 0.014), but on the clean rendered
-        cross frame of tests/runtime/test_pipeline.py its band filter converged to two lobes
-        6 px apart and the horizontal stripe came out 3.0 px off (16: 0.11 px).
+    L_roi: MED filter length inside the tracking bands (≤ the band size). 16, even; the odd
+        lengths 15 and 17, whose whole-sample delay (L − 1)/2 lets `med` read the band output
+        as a slice of the convolution (`cslx.segmentation.med_fft.centre_output`), were tried
+        and dropped (issue 13). 17: on dev video (seeds 0 / 1 / 3) band − full-frame centres
+        0.023 / 0.010 / 0.014 px (16: 0.025 / 0.010 / 0.014), but on the clean rendered cross
+        frame of tests/runtime/test_pipeline.py its band filter converged to two lobes 6 px
+        apart and the horizontal stripe came out 3.0 px off (16: 0.11 px). 15: no lobes and
+        band − full-frame agreement as good (worst |median| over 6 frames × 2 stripes of
+        rendered video, clean / sunny / glare / shadow × dev seeds 0, 1, 3: ≤ 0.019 px, 16:
+        ≤ 0.019 px; clean cross and straight frames of the tests' scenes, seeds 31–36:
+        ≤ 0.013 px, 16: ≤ 0.012 px) and tracking ``process_frame`` 6 % faster (10.28 against
+        10.93 ms median, 150 interleaved frames each, load 3.2–3.4), but the centres are
+        noisier: median |centre − truth| 0.132 against 0.126 px (worse in 11 of the 12
+        videos), 0.142 against 0.119 px on the horizontal stripe of the clean frames (12 of
+        12), and over the rendered T approaches of experiments/tracking_sequences.py (dev
+        seed 7301, tracker with MED; its default has none) offset error mean up in 7 of 8
+        runs (shadow, beside:
+        0.148 → 0.237 mm, max 0.467 → 0.713 mm).
     max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
         for the full frame; roi_max_steps for the tracking bands: the band filter is carried
         from frame to frame and evolves slowly, so a fixed 2 steps per frame keep it at the
