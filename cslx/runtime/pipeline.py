@@ -89,8 +89,7 @@ class PipelineConfig(eqx.Module):
         videos), 0.142 against 0.119 px on the horizontal stripe of the clean frames (12 of
         12), and over the rendered T approaches of experiments/tracking_sequences.py (dev
         seed 7301, tracker with MED; its default has none) offset error mean up in 7 of 8
-        runs (shadow, beside:
-        0.148 → 0.237 mm, max 0.467 → 0.713 mm).
+        runs (shadow, beside: 0.148 → 0.237 mm, max 0.467 → 0.713 mm).
     max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
         for the full frame; roi_max_steps for the tracking bands: the band filter is carried
         from frame to frame and evolves slowly, so a fixed 2 steps per frame keep it at the
