@@ -73,7 +73,14 @@ class PipelineConfig(eqx.Module):
     weights: colour weights (w_r, w_g, w_b) of eq. (8); default R − G (the paper's space).
     L_h / L_v: full-frame MED filter lengths for the horizontal (down columns) and vertical
         (along rows) stripe; None = 50 % of the segment (the paper's choice, correction 7).
-    L_roi: MED filter length inside the tracking bands (≤ the band size).
+    L_roi: MED filter length inside the tracking bands (≤ the band size). 16, even: tried
+        and dropped 17 (issue 13), whose whole-sample delay (L − 1)/2 lets `med` read the
+        band output as a slice of the convolution (`cslx.segmentation.med_fft.centre_output`)
+        instead of one more Fourier shift per stripe (≈ 30 % of band MED's time in one
+        interleaved run): on dev video (seeds 0 / 1 / 3) band − full-frame centres were
+        0.023 / 0.010 / 0.014 px (16: 0.025 / 0.010 / 0.014), but on the clean rendered
+        cross frame of tests/runtime/test_pipeline.py its band filter converged to two lobes
+        6 px apart and the horizontal stripe came out 3.0 px off (16: 0.11 px).
     max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
         for the full frame; roi_max_steps for the tracking bands: the band filter is carried
         from frame to frame and evolves slowly, so a fixed 2 steps per frame keep it at the

@@ -35,6 +35,10 @@ filter over s = (e, θ):
   lateral jump, or a wrong prediction that locked the truth out) the filter restarts at
   their mean, moved to x_ref with the current heading, with a broad covariance. A run of
   rejections that never agree (clutter) restarts it only after `give_up_after` frames.
+  Where the rejected centres, carried by odometry, lie on a line whose direction
+  contradicts the current heading (re-acquiring the crossing weld during the turn at a T,
+  while the heading is still the old weld's, ≈ 90° off) the restart takes the line's
+  heading and its standard deviation instead (`WeldLineFilter._restart_heading`).
 
 - direct heading (`use_vertical_heading`): where the vertical stripe sees the weld's
   direction (`cslx.runtime.weld.heading_from_vertical`), that heading is fused as a

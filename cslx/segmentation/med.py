@@ -256,7 +256,10 @@ def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma
     st = _f.stats(W, pb)
     delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
     W = W * sign
-    out = _f.shifted_output(W, delay, pb)
+    if delay_kind == "centre" and L % 2:
+        out = _f.centre_output(st, sign, pb)  # a whole-sample delay: a slice, no FFT
+    else:
+        out = _f.shifted_output(W, delay, pb)
     out = out.T if axis == 0 else out
     steps = sol.stats["num_steps"]
     return MEDResult(out, W, delay, st.excess, steps, sol.result == optx.RESULTS.successful)

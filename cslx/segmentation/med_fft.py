@@ -94,10 +94,13 @@ def _abs2(z):
 
 
 def _split(Z, n):
-    """Half-spectra (f = 0..n/2) of the two real signals packed in Z."""
-    f = jnp.arange(n // 2 + 1)
-    zf = Z[:, f]
-    zr = jnp.conj(Z[:, (-f) % n])
+    """Half-spectra (f = 0..n/2) of the two real signals packed in Z.
+
+    Z(f) and Z(−f mod n) are read with slices and one reversal, not index arrays: XLA's CPU
+    backend runs an index-array gather ≈ per element, and the split is in every MED step.
+    """
+    zf = Z[:, : n // 2 + 1]
+    zr = jnp.conj(jnp.concatenate([Z[:, :1], Z[:, n - n // 2 :][:, ::-1]], axis=1))
     return 0.5 * (zf + zr), -0.5j * (zf - zr)
 
 
@@ -258,6 +261,22 @@ def shifted_output(W: Float[Array, " L"], delay, pb: Problem) -> Float[Array, "s
     B = jnp.fft.ifft(pb.Z * (filter_spectrum(W, n) * phase), axis=-1)[:, : pb.m]
     out = jnp.stack([B.real, B.imag], axis=1).reshape(-1, pb.m)
     return out[: pb.s]
+
+
+def centre_output(st: Stats, sign, pb: Problem) -> Float[Array, "s m"]:
+    """`shifted_output` of a linear-phase filter of odd length L, from B itself (no FFT).
+
+    Its delay (L − 1)/2 is a whole number of samples, so B(i + delay) is a slice of the full
+    convolution B = W ∗ X that `stats` already computed for the filter (n ≥ m + L − 1: no
+    wrap-around). ``st.ba``/``st.bb`` are B less its segment means, which are zero because
+    the tapered segments X sum to zero (`centre_and_taper`); ``sign`` is the filter's
+    sign (`centre_sign`). Equal to `shifted_output` up to float rounding.
+    """
+    if pb.L % 2 == 0:
+        raise ValueError(f"the delay of an even-length filter (L = {pb.L}) is not a whole sample")
+    d = (pb.L - 1) // 2
+    B = jnp.stack([st.ba, st.bb], axis=1).reshape(-1, st.ba.shape[-1])
+    return sign * B[: pb.s, d : d + pb.m]
 
 
 def ridge_positions(Y: Float[Array, "s k"], sigma: float):

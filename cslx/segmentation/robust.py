@@ -89,6 +89,24 @@ averages out): the goal's median is near that floor even without speckle.
    px against 0.029–0.059 / 0.028–0.068 px before, none above 0.07. Cost: the pass alone
    2.2 ms per stripe (load 6.6); a whole frame and stripe (sunny, H / V, same run, load 13)
    51.5 / 55.8 → 57.7 / 58.7 ms.
+   The pass runs on the monochrome image divided by the reflectance on every frame
+   (`REFINE_REFLECTANCE`, `_reflectance_divided`; the first pass keeps the printed-target
+   gate). Development frames (same 36 frames, H / V): median 0.039 / 0.046 → 0.038 / 0.043 mm,
+   p95 0.173 / 0.198 → 0.169 / 0.191 mm, gross 0.01 / 0.08 → 0.00 / 0.07 %, detection
+   unchanged (clean 0.053 / 0.053 → 0.048 / 0.049 mm; a few conditions lose ≤ 0.002 mm:
+   blue V median, blue and saturated-sunny H p95, shadow V p95). Floors 0.5 / 1 / 3 instead
+   of 0.3: medians 0.038 / 0.044, 0.039 / 0.046, 0.040 / 0.048 mm. Tried on the second pass
+   and dropped (same frames, H / V median, p95 mm): σ across 1.5 / 2 / 3.5 px (0.049 / 0.056,
+   0.044 / 0.050, 0.040 / 0.045 with p95 0.184 / 0.197); the along-path Gaussian's length
+   chosen per centre by the ICI rule from 2–32 px (0.038 / 0.044 but corners 0.18 → 0.24 /
+   0.19 → 0.30, p95 0.185 / 0.206); re-centring on the along-path mean of the first path
+   (V p95 0.298); subtracting the line through the profile's outer taps (H median 0.039, p95
+   0.167). Speckle remains the limit: the clean development frames re-rendered without
+   speckle score median 0.006–0.016 mm, p95 0.040–0.072 mm (4 frames); without texture,
+   about as with it. Flat wall (seeds 41–46): RMS 0.025–0.059 / 0.029–0.069 →
+   0.027–0.056 / 0.027–0.069 px (mean 0.045 → 0.043), largest distance 0.250 → 0.242 px.
+   Cost (sunny and clean frames, same run, load 15.8): 75.7 / 79.9 → 79.5 / 85.3 ms per
+   frame and stripe.
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
@@ -293,14 +311,20 @@ def stripe_sigma(width_px) -> float:
     return float(np.clip(round(2 * SIGMA_PER_WIDTH * s) / 2, SIGMA_MIN, SIGMA_MAX))
 
 
-@functools.partial(jax.jit, static_argnames=("axis", "auto"))
-def _prepare(image, clip_level, weights, *, axis: int, auto: bool):
-    """Monochrome image with clipped runs filled, the filled mask and the weights used
-    (`weights`, or the clip-aware kurtosis search's when `auto`)."""
+@functools.partial(jax.jit, static_argnames=("axis", "auto", "divide"))
+def _prepare(image, clip_level, weights, *, axis: int, auto: bool, divide: bool = True):
+    """Monochrome image with clipped runs filled, the filled mask, the clipped-and-unfilled
+    mask, the weights used (`weights`, or the clip-aware kurtosis search's when `auto`) and
+    the second pass's monochrome image (divided by the reflectance when `divide`)."""
     clipped = clipped_mask(image, clip_level)
     w = _unclipped_space(image, clipped, axis) if auto else weights.astype(image.dtype)
-    mono, filled = fill_clipped(_reflectance_normalised(image, image @ w), clipped, axis=axis)
-    return mono, filled, clipped & ~filled, w
+    raw = image @ w
+    mono, filled = fill_clipped(_reflectance_normalised(image, raw), clipped, axis=axis)
+    if divide:
+        second, _ = fill_clipped(_reflectance_divided(image, raw, clipped), clipped, axis=axis)
+    else:
+        second = mono
+    return mono, filled, clipped & ~filled, w, second
 
 
 #: A frame is a printed / textured target when this share of its neighbouring pixel pairs
@@ -340,6 +364,31 @@ def _reflectance_normalised(image, mono):
     return jnp.where(edges > TEXTURE_EDGES, mono * (med + c) / (dark + c), mono)
 
 
+#: The second pass (step 7) re-measures the centres on the monochrome image divided by the
+#: reflectance (`_reflectance_divided`) on every frame, not only on printed targets.
+REFINE_REFLECTANCE = True
+
+
+def _reflectance_divided(image, mono, clipped):
+    """`mono` · (c̃ + c) / (darkest + c) on every frame, for the second pass (step 7).
+
+    The same division as `_reflectance_normalised` (c = `REFLECTANCE_FLOOR` × the darkest
+    channel's median c̃), without the printed-target gate, and with clipped pixels (whose
+    darkest channel is the laser's white core, not the surface) divided by the median. The
+    first pass keeps the gate: dividing by ambient steps (shadow edges, sunlit sheen) cost
+    it detection. Once the path is found, the division only reshapes the profile under it:
+    a reflectance or shading slope across the stripe, which moves a centre, is flattened.
+    Development frames: see the module docstring, step 7.
+    """
+    from .ridges import _median
+
+    dark = jnp.min(image, axis=-1)
+    med = _median(dark[::4, ::4].reshape(-1))
+    dark = jnp.where(clipped, med, dark)
+    c = REFLECTANCE_FLOOR * med + 1.0
+    return mono * (med + c) / (dark + c)
+
+
 def linked_extract(
     image,
     *,
@@ -375,11 +424,17 @@ def linked_extract(
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)
-        mono, filled, blind, _ = _prepare(
-            image, clip_level, jnp.asarray(weights, image.dtype), axis=axis, auto=auto
+        mono, filled, blind, _, mono2 = _prepare(
+            image,
+            clip_level,
+            jnp.asarray(weights, image.dtype),
+            axis=axis,
+            auto=auto,
+            divide=REFINE_REFLECTANCE,
         )
     else:
         mono, _ = monochrome_for(image, space, stripe)
+        mono2 = mono
         filled = jnp.zeros(mono.shape, bool)
         blind = filled
     sa = SIGMA_ALONG
@@ -393,7 +448,7 @@ def linked_extract(
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
     if REFINE:
-        pos = _second(mono, pos, valid, bridged, sigma=final, axis=axis)
+        pos = _second(mono2, pos, valid, bridged, sigma=final, axis=axis)
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )

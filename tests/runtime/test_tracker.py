@@ -156,3 +156,61 @@ def test_gate_does_not_restart_on_disagreeing_clutter():
     assert kf.restarts == 0 and abs(kf.x[0]) < 0.5
     kf.predict(1.5, 0.0)
     assert kf.update(150.0, 30.0, 0.8) and kf.restarts == 1  # gives up: restarts anyway
+
+
+def _turn_onto_bar(config: KalmanConfig, seed: int = 6):
+    """A filter settled on a weld along x_r, then the robot turns 90° left in place at a T
+    whose bar passes through the robot's centre (its stripe at x_ref meets the bar at
+    y_r = x_ref·cot ψ, ψ the turned angle, while |y_r| ≤ 60 mm), then drives 30 mm along
+    the bar (on it: y_r = 0). Returns the filter and its offset errors along the bar."""
+    rng = np.random.default_rng(seed)
+    x_ref = 150.0
+    kf = WeldLineFilter(config, x_ref)
+    for _ in range(30):
+        kf.predict(1.5, 0.0)
+        kf.update(x_ref, rng.normal(0, 0.1), 0.8)
+    step = 0.025  # rad per frame (0.5 rad/s at 20 fps)
+    psi = 0.0
+    while psi < math.pi / 2 - 1e-9:
+        psi = min(psi + step, math.pi / 2)
+        kf.predict(0.0, step if psi < math.pi / 2 else math.pi / 2 - (psi - step))
+        y = x_ref / math.tan(psi)
+        if abs(y) <= 60.0:
+            kf.update(x_ref, y + rng.normal(0, 0.3), 0.5)
+    errors = []
+    for _ in range(20):
+        kf.predict(1.5, 0.0)
+        kf.update(x_ref, rng.normal(0, 0.3), 0.5)
+        errors.append(abs(kf.x[0]))
+    return kf, errors
+
+
+def test_restart_after_a_turn_takes_the_new_welds_heading():
+    """Re-acquiring the bar during the turn, the filter takes the bar's heading from the
+    rejected centres' line (not the old weld's, 90° off), so the offset along the bar does
+    not drift; with the old rule (keep the heading) it does."""
+    kf, errors = _turn_onto_bar(KalmanConfig())
+    assert kf.restarts >= 1
+    assert abs(math.degrees(kf.x[1])) < 2.0
+    assert max(errors) < 0.6
+    old, old_errors = _turn_onto_bar(KalmanConfig(restart_heading_span_mm=0.0))
+    assert abs(math.degrees(old.x[1])) > 10.0 or max(old_errors) > 1.0
+
+
+def test_restart_keeps_the_heading_on_a_lateral_jump():
+    """Centres that jump sideways on a straight pass keep the filter's heading (the line
+    through them is short and agrees with it)."""
+    rng = np.random.default_rng(8)
+    kf = WeldLineFilter(KalmanConfig(), 150.0)
+    theta = math.radians(2.0)
+    for k in range(40):
+        kf.predict(1.5, 0.0)
+        kf.update(150.0, math.tan(theta) * 1.5 * k + rng.normal(0, 0.1), 0.8)
+    for k in range(40, 46):
+        before = kf.x[1]
+        kf.predict(1.5, 0.0)
+        kf.update(150.0, 6.0 + math.tan(theta) * 1.5 * k + rng.normal(0, 0.1), 0.8)
+        if kf.restarts:
+            break
+    assert kf.restarts == 1
+    assert kf.x[1] == before  # restarted with the heading it had

@@ -452,6 +452,32 @@ def test_symmetric_band_med_agrees_with_full_frame_med():
     assert 0 <= bias_band <= bias_full
 
 
+@pytest.mark.parametrize("axis, L", [(0, 17), (1, 15)])
+def test_odd_linear_phase_output_is_the_shifted_convolution(axis, L):
+    """Issue 13: with odd L a linear-phase filter's delay (L − 1)/2 is a whole sample, and
+    `med` reads its output from B (`med_fft.centre_output`) instead of a Fourier shift
+    (`med_fft.shifted_output`): the same values, the same filter and steps."""
+    h, w = 64, 40
+    I = stripe_image(h, w, wavy_centre(h, w), speckle=0.3, seed=3)
+    I = jnp.asarray(I if axis == 0 else I.T)
+    pb = med_prepare(I, axis=axis, L=L)
+    rng = np.random.default_rng(2)
+    half = rng.normal(size=(L + 1) // 2)
+    W = jnp.asarray(np.concatenate([half, half[: L // 2][::-1]]))
+    W = W / jnp.linalg.norm(W)
+    st = med_fft.stats(W, pb)
+    ref = np.asarray(med_fft.shifted_output(-W, jnp.asarray((L - 1) / 2), pb))
+    out = np.asarray(med_fft.centre_output(st, -1.0, pb))
+    np.testing.assert_allclose(out, ref, atol=1e-9 * np.abs(ref).max())
+    r = med(I, axis=axis, L=L, symmetric=True, max_steps=5)
+    assert float(r.delay) == (L - 1) / 2
+    st = med_fft.stats(r.filter, pb)
+    ref = np.asarray(med_fft.shifted_output(r.filter, r.delay, pb))
+    np.testing.assert_allclose(np.asarray(r.output), ref.T if axis == 0 else ref, atol=1e-9 * 100)
+    with pytest.raises(ValueError, match="whole sample"):
+        med_fft.centre_output(st, 1.0, med_prepare(I, axis=axis, L=L + 1))
+
+
 # ---------------------------------------------------------------- dtypes and errors
 
 

@@ -174,3 +174,26 @@ def test_kurtosis_search_ignores_spaces_flat_up_to_rounding():
     mono = rgb @ w
     rows = np.argmax(mono[:, :100], axis=0)  # left of the vertical stripe
     assert np.all(np.abs(rows - v_true[:100]) <= 1.5)
+
+
+def test_second_pass_divides_a_reflectance_slope_out(monkeypatch):
+    """A smooth reflectance rise beside the stripe (no printed target: the first pass's gate
+    stays off) pulls the centre towards the brighter side; the second pass, run on the image
+    divided by the reflectance, removes most of that pull."""
+    from cslx.segmentation import robust
+
+    rng = np.random.default_rng(14)
+    h, w = 100, 160
+    vv = np.arange(h)[:, None].astype(float)
+    v_true = 50.3 + 0.02 * (np.arange(w) - 80)
+    refl = 0.45 + 0.55 / (1 + np.exp(-(vv - v_true[None, :] - 1.0) / 1.2))
+    laser = 150.0 * np.exp(-0.5 * ((vv - v_true[None, :]) / 1.3) ** 2)
+    rgb = np.stack([refl * (110 + laser), 110 * refl, 110 * refl], -1)
+    rgb = np.clip(rgb + rng.normal(0, 1.0, rgb.shape), 0, 255)
+    errs = {}
+    for divide in (False, True):
+        monkeypatch.setattr(robust, "REFINE_REFLECTANCE", divide)
+        c = extract(rgb, "linked", space="r-g", stripe="h")
+        errs[divide] = np.median(np.abs(np.asarray(c.pos) - v_true)[10:-10])
+    assert errs[False] > 0.1
+    assert errs[True] < 0.5 * errs[False]
