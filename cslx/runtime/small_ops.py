@@ -57,29 +57,33 @@ def _from_key(key: Array) -> Float[Array, " k"]:
 def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array, ""]:
     """``jnp.nanmedian(jnp.where(mask, x, nan))`` without a sort (float32; others sort).
 
-    The two middle order statistics are found by bisection on the 32-bit keys of the
-    values (32 counting passes over the points, exact), and averaged; NaN when no point is
+    The lower middle order statistic is found by bisection on the 32-bit keys of the values
+    (32 counting passes over the points, exact), the upper one from it in one more pass (the
+    same value, or the least key above it), and the two are averaged; NaN when no point is
     selected. No gradient flows through it (it is a weighting constant of the IRLS loops).
+    Bisecting for the lower rank alone (rather than both ranks in each pass) took a median
+    of 640 points from 14.8 to 9.7 µs (issue 13; interleaved, same run, load 23).
     """
     x = lax.stop_gradient(x)
     if x.dtype != jnp.float32:  # the keys are 32-bit: other dtypes take the sort
         return jnp.nanmedian(jnp.where(mask, x, jnp.nan))
     keep = mask & ~jnp.isnan(x)
     k = jnp.sum(keep.astype(jnp.int32))
-    key = jnp.where(keep, _order_key(x), jnp.uint32(0xFFFFFFFF))
-    rank = jnp.stack([jnp.maximum((k - 1) // 2, 0), k // 2])
+    top = jnp.uint32(0xFFFFFFFF)
+    key = jnp.where(keep, _order_key(x), top)
+    rank = jnp.maximum((k - 1) // 2, 0)
 
     def step(_, bounds):
         lo, hi = bounds
         mid = lo + (hi - lo) // 2
-        count = jnp.sum((key[None, :] <= mid[:, None]).astype(jnp.int32), axis=1)
-        ok = count > rank
+        ok = jnp.sum((key <= mid).astype(jnp.int32)) > rank
         return jnp.where(ok, lo, mid + 1), jnp.where(ok, mid, hi)
 
-    lo = jnp.zeros(2, jnp.uint32)
-    hi = jnp.full(2, 0xFFFFFFFF, jnp.uint32)
-    _, hi = lax.fori_loop(0, 32, step, (lo, hi))
-    mid2 = _from_key(hi)
+    _, low = lax.fori_loop(0, 32, step, (jnp.uint32(0), top))
+    # rank k // 2: the same key if it is repeated there, else the least key above it
+    repeated = jnp.sum((key <= low).astype(jnp.int32)) > k // 2
+    high = jnp.where(repeated, low, jnp.min(jnp.where(key > low, key, top)))
+    mid2 = _from_key(jnp.stack([low, high]))
     return jnp.where(k > 0, 0.5 * (mid2[0] + mid2[1]), jnp.nan)
 
 

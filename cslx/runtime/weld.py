@@ -452,7 +452,7 @@ def weld_features(
     fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
     # where the stripes cross, the vertical stripe's centres are pulled by the horizontal
     # one: in rendered sunlight every stray junction report lay within 10 mm of it
-    x_h = jnp.nanmedian(jnp.where(valid_h, profile_h[:, VERTICAL_AXIS], jnp.nan))
+    x_h = masked_median(profile_h[:, VERTICAL_AXIS], valid_h)  # = nanmedian, no sort
     away = jnp.abs(profile_v[:, VERTICAL_AXIS] - x_h) > config.crossing_mask_mm
     fv = crossing_feature(profile_v, valid_v & (away | ~jnp.isfinite(x_h)), config)
     junction = fv.found & (fv.confidence >= config.junction_min_confidence)

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from cslx.runtime import junction
 from cslx.runtime.junction import _first_argmax, crossing_feature
 from cslx.runtime.weld import WeldConfig, stripe_feature
 
@@ -124,6 +125,39 @@ def test_first_argmax_equals_argmax():
     got = np.asarray(_first_argmax(jnp.asarray(a)))
     np.testing.assert_array_equal(got, np.asarray(jnp.argmax(jnp.asarray(a), axis=1)))
     assert got[4] == 0 and got[7] == 5 and got[8] == 0
+
+
+def _toes(points, valid, config):
+    """How many run ends `crossing_feature` tests (its toe rule, in NumPy)."""
+    x, z = points[valid, 0], points[valid, 2]
+    o = np.argsort(x)
+    x, z = x[o], z[o]
+    h = z - np.polyval(np.polyfit(x, z, 1), x)
+    low = np.array([h[(x >= xi) & (x <= xi + config.crossing_background_mm)].min() for xi in x])
+    above = (h - low) > config.threshold_mm
+    return int(np.sum(above[:-1] & ~above[1:]))
+
+
+@pytest.mark.parametrize("bumps", [0, 40])
+def test_apex_tests_on_the_first_toes_equal_every_point(monkeypatch, bumps):
+    """The apex tests on the first MAX_TOES toes give the values of the tests on every point,
+    and a profile with more toes than that takes the tests on every point (lax.cond)."""
+    rng = np.random.default_rng(5)
+    pts, valid = vertical_stripe(rng, bar_x=170.0)
+    if bumps:  # narrow bumps all along the stripe: many toes
+        x = pts[:, 0]
+        pts[:, 2] += 0.6 * (np.cos(2 * np.pi * x / (121.0 / bumps)) > 0.6)
+    config = WeldConfig()
+    n_toes = _toes(pts, valid, config)
+    assert (n_toes > junction.MAX_TOES) == bool(bumps), n_toes
+    P, V = jnp.asarray(pts), jnp.asarray(valid)
+    short = jax.jit(crossing_feature)(P, V, config)
+    monkeypatch.setattr(junction, "MAX_TOES", pts.shape[0])  # every point, as before
+    every = jax.jit(crossing_feature)(P, V, config)
+    for a, b in zip(short, every, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    if not bumps:
+        assert bool(short.found)
 
 
 def _flank_to_bar(rng, bar_x, hi, lo, bar=(14.0, 1.9), n=480):
