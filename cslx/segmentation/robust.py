@@ -158,7 +158,17 @@ SIGMA0 = SIGMA_MIN
 SIGMA_PER_WIDTH = 1.0
 #: Smoothing along the stripe (px) of the column-profile candidates.
 SIGMA_ALONG = 6.0
+#: Ceiling of the width-aware σ on frames up to 480 px high (px); taller frames scale it by
+#: height / 480 (`stripe_sigma`). It keeps large σ from rounding the bead's corners, whose
+#: size in px grows with the camera's magnification, for which the frame size stands in.
+#: Rig audit (dev seeds 8800–8801, T scenes, a 4 mm sheet): a 1280×720 camera with twice
+#: the focal length measures s ≈ 9.2–9.7 px; σ 6 / 9 / 12 gave horizontal gross (> 1 mm)
+#: 32 + 22 / 5 + 0 / 5 + 0 centres and medians 0.146–0.181 / 0.105–0.112 / 0.087–0.098 mm,
+#: vertical gross 55 + 0 / 20 + 0 / 0 + 21. On 640×480 frames the ceiling of 6 is unchanged
+#: (there, saturated cores measure s ≈ 6.6–12 px on the development frames).
 SIGMA_MAX = 6.0
+#: Frame height (px) up to which `SIGMA_MAX` applies unscaled.
+SIGMA_MAX_HEIGHT = 480
 #: Smooth the linked path with adaptive local quadratics (`cslx.segmentation.path`).
 SMOOTH_PATH = True
 
@@ -301,14 +311,19 @@ def _search_jit(image, clip_level, *, axis):
     return _unclipped_space(image, clipped_mask(image, clip_level), axis)
 
 
-def stripe_sigma(width_px) -> float:
-    """Width-aware Steger scale from the measured profile std s (px): see the module docstring."""
+def stripe_sigma(width_px, height: int | None = None) -> float:
+    """Width-aware Steger scale from the measured profile std s (px): see the module docstring.
+
+    `height`: the frame's smaller side (px); above `SIGMA_MAX_HEIGHT` the ceiling
+    `SIGMA_MAX` grows in proportion (None: the ceiling unscaled).
+    """
     w = np.asarray(width_px, float)
     w = w[np.isfinite(w)]
     if len(w) < 8:
         return SIGMA_MIN
     s = float(np.median(w))
-    return float(np.clip(round(2 * SIGMA_PER_WIDTH * s) / 2, SIGMA_MIN, SIGMA_MAX))
+    ceiling = SIGMA_MAX * max(1.0, (height or 0) / SIGMA_MAX_HEIGHT)
+    return float(np.clip(round(2 * SIGMA_PER_WIDTH * s) / 2, SIGMA_MIN, ceiling))
 
 
 @functools.partial(jax.jit, static_argnames=("axis", "auto", "divide"))
@@ -443,7 +458,7 @@ def linked_extract(
     c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params, sigma_along=sa)
     if sigma is None:
         # The first pass at the floor σ is final unless the measured width asks for more.
-        final = stripe_sigma(width)
+        final = stripe_sigma(width, min(mono.shape))
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)

@@ -8,7 +8,7 @@ import pytest
 
 from cslx.segmentation import extract, steger_centres
 from cslx.segmentation.ridges import LinkParams, candidates, linked_centres, noise_std
-from cslx.segmentation.robust import clipped_mask, fill_clipped, stripe_sigma
+from cslx.segmentation.robust import SIGMA_MIN, clipped_mask, fill_clipped, stripe_sigma
 
 H, W = 120, 160
 
@@ -203,6 +203,15 @@ def test_vmap_over_frames_and_candidates_shape():
 def test_stripe_sigma_rule():
     assert stripe_sigma([np.nan] * 3) > 0
     assert stripe_sigma(np.full(50, 10.0)) >= stripe_sigma(np.full(50, 1.0))
+
+
+def test_stripe_sigma_follows_wide_stripes():
+    # Steger's σ ≥ s must hold for the wide stripes of high-resolution rigs too: a 1280×720
+    # camera (twice the focal length) sees a 4 mm sheet with profile std s ≈ 9–10 px.
+    assert stripe_sigma(np.full(50, 9.0), 720) >= 9.0
+    assert stripe_sigma(np.full(50, 1.0), 720) == SIGMA_MIN  # narrow stripes keep the floor
+    # 640×480 frames keep the ceiling the benchmark evidence chose.
+    assert stripe_sigma(np.full(50, 10.0), 480) == stripe_sigma(np.full(50, 10.0))
 
 
 def test_cli_default_is_linked_with_sigma_column(tmp_path):
