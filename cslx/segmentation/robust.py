@@ -138,6 +138,7 @@ __all__ = [
     "clipped_mask",
     "fill_clipped",
     "linked_extract",
+    "max_run_for",
     "search_space_unclipped",
     "stripe_sigma",
 ]
@@ -158,14 +159,9 @@ SIGMA0 = SIGMA_MIN
 SIGMA_PER_WIDTH = 1.0
 #: Smoothing along the stripe (px) of the column-profile candidates.
 SIGMA_ALONG = 6.0
-#: Ceiling of the width-aware σ on frames up to 480 px high (px); taller frames scale it by
-#: height / 480 (`stripe_sigma`). It keeps large σ from rounding the bead's corners, whose
-#: size in px grows with the camera's magnification, for which the frame size stands in.
-#: Rig audit (dev seeds 8800–8801, T scenes, a 4 mm sheet): a 1280×720 camera with twice
-#: the focal length measures s ≈ 9.2–9.7 px; σ 6 / 9 / 12 gave horizontal gross (> 1 mm)
-#: 32 + 22 / 5 + 0 / 5 + 0 centres and medians 0.146–0.181 / 0.105–0.112 / 0.087–0.098 mm,
-#: vertical gross 55 + 0 / 20 + 0 / 0 + 21. On 640×480 frames the ceiling of 6 is unchanged
-#: (there, saturated cores measure s ≈ 6.6–12 px on the development frames).
+#: σ ceiling (px) up to 480 px frames; above, ×min(H, W)/480 (the stripe's width in px grows
+#: with magnification). Rig audit (1280×720, 2× focal length, 4 mm sheet, s ≈ 9.5 px, dev
+#: seeds 8800–8801): σ 6 / 9 / 12 gave H gross 54 / 5 / 5 and V 55 / 20 / 21 centres.
 SIGMA_MAX = 6.0
 #: Frame height (px) up to which `SIGMA_MAX` applies unscaled.
 SIGMA_MAX_HEIGHT = 480
@@ -312,11 +308,8 @@ def _search_jit(image, clip_level, *, axis):
 
 
 def stripe_sigma(width_px, height: int | None = None) -> float:
-    """Width-aware Steger scale from the measured profile std s (px): see the module docstring.
-
-    `height`: the frame's smaller side (px); above `SIGMA_MAX_HEIGHT` the ceiling
-    `SIGMA_MAX` grows in proportion (None: the ceiling unscaled).
-    """
+    """Width-aware Steger σ from the profile std s (px; module docstring, step 3); `height`
+    is the frame's smaller side, which scales the ceiling `SIGMA_MAX` above 480 px."""
     w = np.asarray(width_px, float)
     w = w[np.isfinite(w)]
     if len(w) < 8:
@@ -324,6 +317,13 @@ def stripe_sigma(width_px, height: int | None = None) -> float:
     s = float(np.median(w))
     ceiling = SIGMA_MAX * max(1.0, (height or 0) / SIGMA_MAX_HEIGHT)
     return float(np.clip(round(2 * SIGMA_PER_WIDTH * s) / 2, SIGMA_MIN, ceiling))
+
+
+def max_run_for(shape) -> int:
+    """`MAX_RUN` scaled like the σ ceiling (`SIGMA_MAX`): a 1280×720 rig at twice the focal
+    length sees saturated cores of 30+ px (dev seeds 8800–8801: detection H / V 97.5 / 91.2
+    → 100 / 99.9 %)."""
+    return int(round(MAX_RUN * max(1.0, min(shape) / SIGMA_MAX_HEIGHT)))
 
 
 @functools.partial(jax.jit, static_argnames=("axis", "auto", "divide"))
@@ -334,9 +334,13 @@ def _prepare(image, clip_level, weights, *, axis: int, auto: bool, divide: bool 
     clipped = clipped_mask(image, clip_level)
     w = _unclipped_space(image, clipped, axis) if auto else weights.astype(image.dtype)
     raw = image @ w
-    mono, filled = fill_clipped(_reflectance_normalised(image, raw), clipped, axis=axis)
+    run = max_run_for(image.shape[:2])
+    mono, filled = fill_clipped(
+        _reflectance_normalised(image, raw), clipped, axis=axis, max_run=run
+    )
     if divide:
-        second, _ = fill_clipped(_reflectance_divided(image, raw, clipped), clipped, axis=axis)
+        divided = _reflectance_divided(image, raw, clipped)
+        second, _ = fill_clipped(divided, clipped, axis=axis, max_run=run)
     else:
         second = mono
     return mono, filled, clipped & ~filled, w, second

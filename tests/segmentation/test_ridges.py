@@ -239,3 +239,23 @@ def test_cli_default_is_linked_with_sigma_column(tmp_path):
     assert np.median(np.abs(v - 60.37)) < 0.15
     assert all(float(r[4]) > 0 for r in body)
     assert np.mean([r[5] == "1" for r in body]) > 0.9
+
+
+def test_linked_fills_wide_clipped_cores_on_large_frames():
+    # A 1280×720 rig (twice the 640×480 focal length) sees the saturated cores twice as
+    # wide: a 32 px plateau must still be filled from its flanks and measured.
+    from cslx.segmentation.robust import MAX_RUN, max_run_for
+
+    assert max_run_for((480, 640)) == MAX_RUN
+    h, w, centre = 720, 720, 360.3
+    v = np.arange(h)[:, None] - (centre + 0.02 * (np.arange(w)[None, :] - w / 2))
+    red = 60 + 400 * np.exp(-0.5 * (v / 14.0) ** 2)  # clipped over ≈ 30 rows
+    img = np.stack([red, 60 + 0.3 * (red - 60), np.full_like(red, 55)], -1)
+    img = np.clip(np.round(img + np.random.default_rng(3).normal(0, 1.0, img.shape)), 0, 255)
+    run = int(np.sum(img[:, w // 2, 0] >= 254))
+    assert run > MAX_RUN  # the case that used to be left unmeasured
+    c = extract(img.astype(np.uint8), "linked", stripe="h")
+    pos, valid = np.asarray(c.pos), np.asarray(c.valid)
+    truth = centre + 0.02 * (np.arange(w) - w / 2)
+    assert valid.mean() > 0.99
+    assert np.nanmedian(np.abs(pos[valid] - truth[valid])) < 0.3
