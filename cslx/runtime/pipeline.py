@@ -36,6 +36,7 @@ evaluates both branches: archives should use the full frame, ``roi=False``).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import NamedTuple
 
@@ -98,7 +99,13 @@ class PipelineConfig(eqx.Module):
         steps, 0.009 px with ≤ 6 (5 taken); held-out seed 2 0.029 px with 1 and 2; median
         |centre − truth| unchanged, 0.104–0.110 px). 2 rather than 1 for margin after a
         sudden change; ≤ 6 cost ≈ 2 ms more a frame.
-    sigma: Steger scale, px. threshold / snr: Steger's relative and noise-floor thresholds.
+    sigma: Steger scale, px, for frames up to 480 px; larger frames scale it by
+        min(H, W) / 480 (`_frame_config`). Rig audit, 1280×720 at twice the focal length
+        (clean T scenes, dev seeds 8804–8805, cold frames): σ 2 gave 36–91 gross (> 1 mm)
+        centres per stripe, median 0.32–0.39 mm; σ 3 (this rule) 0–5, 0.15–0.21 mm; σ 4
+        0, 0.09–0.14 mm (the frame size understates that rig's 2× magnification; the
+        focal length, a traced value here, cannot set a static σ).
+    threshold / snr: Steger's relative and noise-floor thresholds.
     roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
@@ -444,8 +451,15 @@ def clean_profile(P: Float[Array, "n 3"], valid: Bool[Array, " n"], config: Pipe
     return jnp.where(keep[:, None], P, jnp.nan), keep
 
 
+def _frame_config(config: PipelineConfig, height: int, width: int) -> PipelineConfig:
+    """`config` with Steger's σ scaled by min(H, W) / 480 above 480 px (see `sigma`)."""
+    factor = min(height, width) / 480
+    return dataclasses.replace(config, sigma=config.sigma * factor) if factor > 1 else config
+
+
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
+    config = _frame_config(config, height, width)
     dtype = state.filter_h.dtype
     if roi and config.roi_enabled(height, width) and config.band_first:
         cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped)

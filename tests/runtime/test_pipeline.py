@@ -128,3 +128,14 @@ def test_tracking_loop_compiles_once(scene):
     assert bool(state.tracking)
     assert _process_frame._cache_size() == size
     assert [(x.dtype, x.shape, x.weak_type) for x in jax.tree_util.tree_leaves(state)] == first
+
+
+def test_steger_sigma_scales_with_large_frames():
+    # Rig audit: on a 1280×720 rig a fixed 2 px σ gave 36–91 gross centres per stripe.
+    from cslx.runtime.pipeline import PipelineConfig, _frame_config
+
+    config = PipelineConfig()
+    assert _frame_config(config, 480, 640) is config  # the standard rig: unchanged
+    assert _frame_config(config, 240, 320) is config
+    big = _frame_config(config, 720, 1280)
+    assert big.sigma == config.sigma * 1.5 and big.roi_half_h == config.roi_half_h
