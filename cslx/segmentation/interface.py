@@ -46,6 +46,12 @@ DEFAULT_SIGMA = 2.0
 _BASELINES = {"cm": baselines.cm, "la": baselines.la, "qa": baselines.qa, "aa": baselines.aa}
 
 
+#: Smallest frame (px along / across the stripe) the linked detector accepts: its path
+#: windows need ≥ 38 centres along the stripe and its K = 4 candidates 4 px across.
+LINKED_MIN_ALONG = 40
+LINKED_MIN_ACROSS = 8
+
+
 def _axis(stripe: str) -> int:
     if stripe not in STRIPES:
         raise ValueError(f"stripe must be 'h' (horizontal) or 'v' (vertical), got {stripe!r}")
@@ -118,6 +124,14 @@ def extract(
     axis = _axis(stripe)
     if method == "linked":
         from .robust import linked_extract
+
+        shape = np.shape(image)[:2]
+        along, across = (shape[1], shape[0]) if axis == 0 else shape
+        if along < LINKED_MIN_ALONG or across < LINKED_MIN_ACROSS:
+            raise ValueError(
+                f"image is {shape[1]}×{shape[0]} px: the linked detector needs at least "
+                f"{LINKED_MIN_ALONG} px along the stripe and {LINKED_MIN_ACROSS} across"
+            )
 
         return linked_extract(
             image, space="auto" if space is None else space, stripe=stripe, sigma=sigma, **params

@@ -259,3 +259,9 @@ def test_linked_fills_wide_clipped_cores_on_large_frames():
     truth = centre + 0.02 * (np.arange(w) - w / 2)
     assert valid.mean() > 0.99
     assert np.nanmedian(np.abs(pos[valid] - truth[valid])) < 0.3
+
+
+@pytest.mark.parametrize("shape", [(7, 9, 3), (1, 1, 3), (64, 30, 3)])
+def test_linked_rejects_tiny_frames_clearly(shape):
+    with pytest.raises(ValueError, match="at least"):
+        extract(np.zeros(shape, np.uint8), "linked", stripe="h")
