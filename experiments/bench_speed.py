@@ -77,7 +77,7 @@ FULL = dict(
     ridge_frames=2,
     long_frames=10_000,
     budget_s=60.0,
-    cli_frames=48,
+    cli_frames=240,
     agreement_frames=8,
 )
 QUICK = dict(
@@ -774,12 +774,15 @@ def bench_batch(b: Bench) -> None:
 def bench_cli_extract(b: Bench) -> None:
     """`cslx extract --method med` end to end (a subprocess) on PNG archives.
 
-    Runs of CLI_BASE_FRAMES and of ``cli_frames`` files, twice each, interleaved, after one
+    Runs of CLI_BASE_FRAMES and of ``cli_frames`` files, three times each, interleaved, after one
     untimed run that fills a persistent compile cache (``CSLX_JAX_CACHE``, a temporary
     folder) so that every timed run loads its program instead of compiling it (a compile of
     ≈ 20 s varies by seconds under load, which made the difference of two compiling runs
-    swing by tens of ms per frame). Per frame: the median over the two pairs of the time
-    difference over the frame difference (start-up, imports and cache loading cancel).
+    swing by tens of ms per frame). Per frame: the median over the three pairs of the time
+    difference over the frame difference (start-up, imports and cache loading cancel). The
+    long run has 240 files: with 48 the difference (≈ 0.35 s) was below the run-to-run
+    scatter of the process start (a run at 17b9d8a gave −0.8 ms per frame); a difference
+    that is not positive is reported as not measured.
     """
     import cv2
 
@@ -794,7 +797,7 @@ def bench_cli_extract(b: Bench) -> None:
             cv2.imwrite(p, cv2.cvtColor(b.frames[i % b.F], cv2.COLOR_RGB2BGR))
             paths.append(p)
         walls: dict[int, list[float]] = {CLI_BASE_FRAMES: [], n_big: []}
-        for k, count in enumerate((CLI_BASE_FRAMES,) + (CLI_BASE_FRAMES, n_big) * 2):
+        for k, count in enumerate((CLI_BASE_FRAMES,) + (CLI_BASE_FRAMES, n_big) * 3):
             out = os.path.join(tmp, f"c{count}.csv")
             cmd = [sys.executable, "-m", "cslx", "extract", "--method", "med", "--space", "r-g"]
             cmd += ["--stripe", "both", "--out", out, *paths[:count]]
@@ -1040,7 +1043,7 @@ def _targets(b: Bench) -> list[dict]:
             dict(
                 target="`cslx extract --method med` ≤ 20 ms per frame (decode + CSV included)",
                 measured=f"{get('cli'):.1f} ms per frame (both stripes)",
-                verdict=_verdict(get("cli") <= 20.0),
+                verdict=_verdict(get("cli") <= 20.0 if get("cli") > 0 else None),
             )
         )
     batch = [r for r in b.rows if r["group"] == "batch" and "CPU default" in r["name"]]
@@ -1169,7 +1172,7 @@ def _markdown(b: Bench, prov, quick) -> str:
     if "cli" in ex:
         c = ex["cli"]
         notes.append(
-            f"- `cslx extract` (warm compile cache, medians of 2 runs): {c['frames']} PNGs in "
+            f"- `cslx extract` (warm compile cache, medians of 3 runs): {c['frames']} PNGs in "
             f"{c['wall_s']:.1f} s, {c['base_frames']} in {c['base_wall_s']:.1f} s "
             f"({c['centre_rows']} centre rows written); the difference per frame is the "
             "goal's figure.\n"
