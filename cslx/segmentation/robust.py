@@ -126,7 +126,7 @@ from jax import lax
 
 from .path import smooth_path
 from .refine import refine_centres
-from .ridges import PATH_HALF_WINDOW, LinkParams, _path_scatter, linked_centres
+from .ridges import PATH_HALF_WINDOW, LinkParams, _median, _path_scatter, linked_centres
 from .steger import Centres
 
 __all__ = [
@@ -276,7 +276,6 @@ def _grid_scores(image, candidates: np.ndarray):
 def _unclipped_space(image, clipped, axis: int):
     """Weights (3,) of the clip-aware kurtosis search (section 3.1); traced, jit-safe."""
     from .colour import CANDIDATES, _skewness_sign
-    from .ridges import _median
 
     flat = image.reshape(-1, 3)
     median = jnp.stack([_median(flat[::7, c]) for c in range(3)])
@@ -370,17 +369,21 @@ def _reflectance_normalised(image, mono):
     → 0.00 / 0.00 %, detection 98.95 / 98.85 → 100 / 100 %; applied to every frame it cost
     detection in sun and shadow (vertical 99.3 %), hence the gate.
     """
-    from .ridges import _median
-
-    dark = jnp.min(image, axis=-1)
-    med = _median(dark[::4, ::4].reshape(-1))
+    dark, med, c = _darkest(image)
     step = EDGE_STEP * med
     edges = 0.5 * (
         jnp.mean(jnp.abs(jnp.diff(dark, axis=0)) > step)
         + jnp.mean(jnp.abs(jnp.diff(dark, axis=1)) > step)
     )
-    c = REFLECTANCE_FLOOR * med + 1.0
     return jnp.where(edges > TEXTURE_EDGES, mono * (med + c) / (dark + c), mono)
+
+
+def _darkest(image):
+    """The darkest channel (reflectance × ambient), its median c̃ (every 4th pixel) and the
+    regularising floor c = `REFLECTANCE_FLOOR` · c̃ + 1 of the reflectance divisions."""
+    dark = jnp.min(image, axis=-1)
+    med = _median(dark[::4, ::4].reshape(-1))
+    return dark, med, REFLECTANCE_FLOOR * med + 1.0
 
 
 #: The second pass (step 7) re-measures the centres on the monochrome image divided by the
@@ -399,12 +402,8 @@ def _reflectance_divided(image, mono, clipped):
     a reflectance or shading slope across the stripe, which moves a centre, is flattened.
     Development frames: see the module docstring, step 7.
     """
-    from .ridges import _median
-
-    dark = jnp.min(image, axis=-1)
-    med = _median(dark[::4, ::4].reshape(-1))
+    dark, med, c = _darkest(image)
     dark = jnp.where(clipped, med, dark)
-    c = REFLECTANCE_FLOOR * med + 1.0
     return mono * (med + c) / (dark + c)
 
 
