@@ -97,6 +97,7 @@ import numpy as np
 from ..config import MOTION
 from .junction_track import JunctionTrack
 from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
+from .stripe_width import choose_sigma, frame_sigma, stripe_widths, with_frame_sigma
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -255,13 +256,13 @@ class Tracker:
         speed_mm_s: float = MOTION.speed_mm_s,
         fps: float = MOTION.fps,
         roi: bool = True,
+        auto_sigma: bool = True,
         log: logging.Logger | Callable[[str], None] | None = None,
     ):
         import jax
         import jax.numpy as jnp
 
         from . import pipeline as pl
-        from .compiled import compile_cached, tree_digest
 
         self._log = _logger(log)
         # float32 is the speed path (docs/metrics.md, performance notes). The cast runs in
@@ -284,7 +285,26 @@ class Tracker:
         init = jax.jit(pl.init_state, static_argnums=(0, 1, 2))
         self._state0 = init(self.config, (width, height), jnp.float32)
 
-        sensor32, config_ = self.sensor, self.config
+        self._roi, self.auto_sigma, self.stripe_width_px = roi, bool(auto_sigma), (NAN, NAN)
+        self._programs: dict[float, Any] = {}  # compiled step per Steger σ (stripe_width)
+        self.sigma = self.sigma0 = frame_sigma(self.config, height, width)
+        self._compiled = self._program(self.sigma)
+        self.compile_s = self._compile_s
+        self.reset()
+
+    def _program(self, sigma: float):
+        """The compiled step with Steger's σ = `sigma` px (compiled once per σ and tracker)."""
+        import jax
+        import jax.numpy as jnp
+
+        from . import pipeline as pl
+        from .compiled import compile_cached, tree_digest
+
+        if sigma in self._programs:
+            return self._programs[sigma]
+        height, width = self.image_shape[:2]
+        config_ = with_frame_sigma(self.config, sigma, height, width)
+        sensor32, roi = self.sensor, self._roi
 
         def _step(rgb, state):
             result, new = pl._process(sensor32, config_, rgb, state, roi)
@@ -295,16 +315,30 @@ class Tracker:
 
         t0 = time.perf_counter()
         spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
-        key = f"tracker|{self.config!r}|{roi}|{tree_digest(self.sensor)}"
+        key = f"tracker|{config_!r}|{roi}|{tree_digest(self.sensor)}"
         out_like = ((0, 0, 0), self._state0)
-        self._compiled = compile_cached(_step, (spec, self._state0), out_like, key)
-        self.compile_s = time.perf_counter() - t0
+        program = compile_cached(_step, (spec, self._state0), out_like, key)
+        self._compile_s = time.perf_counter() - t0
+        self._programs[sigma] = program
         cache = jax.config.jax_compilation_cache_dir
         self._log(
-            f"tracker: compiled the {width}×{height} pipeline in {self.compile_s:.2f} s"
+            f"tracker: compiled the {width}×{height} pipeline (Steger σ {sigma:g} px) in "
+            f"{self._compile_s:.2f} s"
             + (f" (persistent cache {cache})" if cache else " (no persistent compile cache)")
         )
-        self.reset()
+        return program
+
+    def _choose_sigma(self, frame: np.ndarray) -> None:
+        """Steger's σ from the stripes' width on the first frame with both (`stripe_width`)."""
+        widths = stripe_widths(frame, self.config.weights)
+        if not all(math.isfinite(w) for w in widths):
+            return  # no stripe to measure: the next frame tries again
+        self._sigma_pending = False
+        self.stripe_width_px = widths
+        sigma = choose_sigma(max(widths), self.sigma0)
+        if sigma != self.sigma:
+            self._log(f"tracker: stripes {widths[0]:.1f} / {widths[1]:.1f} px wide: σ {sigma:g} px")
+            self._compiled, self.sigma = self._program(sigma), sigma
 
     @classmethod
     def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
@@ -357,6 +391,8 @@ class Tracker:
         self._odd_widths = 0
         self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
         self._restarts = 0
+        self._sigma_pending = self.auto_sigma  # σ is measured again after a reset
+        self.sigma, self._compiled = self.sigma0, self._programs[self.sigma0]
 
     def _carry_history(self, d: float, delta: float) -> None:
         if not len(self._hist):
@@ -476,6 +512,8 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
+        if self._sigma_pending:
+            self._choose_sigma(frame)
         (summary, points_h, points_v), self._state = self._compiled(frame, self._state)
         raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
         obs.raw = raw
