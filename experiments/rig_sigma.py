@@ -91,7 +91,7 @@ def audit(names, seeds, sigmas, n_frames=2):
             factor = max(1.0, min(H, W) / 480)
             for sigma in sigmas:
                 if sigma == 0:  # the tracker's rule from the first frame's widths
-                    sigma = choose_sigma(np.nanmax([wh, wv]), base.sigma * factor)
+                    sigma = choose_sigma(np.nanmax([wh, wv]), base.sigma * factor, min(H, W))
                 config = dataclasses.replace(base, sigma=sigma / factor)
                 state = pl.init_state(config, (W, H), jnp.float32)
                 for i, (img, gt) in enumerate(frames):
@@ -114,7 +114,8 @@ def audit(names, seeds, sigmas, n_frames=2):
                         )
                         r = rows[-1]
                         print(
-                            f"{name:8s} {seed} f{i} σ{sigma:<4} {r['stripe']} w {r['width_px']:5.1f}"
+                            f"{name:8s} {seed} f{i} σ{sigma:<4} {r['stripe']}"
+                            f" w {r['width_px']:5.1f}"
                             f" gross {r['gross']:4d} med {r['median_mm']:.3f} n {r['n']:4d}"
                             f" roi {int(r['roi'])}",
                             flush=True,

@@ -1,6 +1,42 @@
 """The stripe's width on a frame, and Steger's σ for it (host-side, NumPy, outside the jit).
 
-Filled in below (`choose_sigma`).
+Steger (1998) needs σ ≥ w/√3 for a bar profile of half-width w; for a Gaussian profile of
+std s the bar of the same second moment gives σ ≥ s (`cslx.segmentation.steger.
+sigma_for_width`, the robust extractor's `cslx.segmentation.robust.stripe_sigma`). Below it
+the smoothed profile of a wide stripe keeps several maxima (speckle, a clipped core's
+flanks) and Steger's detector picks the wrong one. The stripe's width in pixels depends on
+the rig (focal length, frame size, stand-off), the laser (sheet thickness, power: a
+clipped core is a wide plateau) and the light, so the tracker (`cslx.runtime.tracker.
+Tracker`) measures it: on the first frame after a start or `reset` with both stripes, the
+median FWHM of the column (row) profiles (`stripe_widths`, every 4th profile, ≈ 3 ms at
+640×480), and σ = FWHM / 2.355 (the profile's std) on a 0.5 px grid (`choose_sigma`), at
+least the configured σ (2 px at 640×480, `cslx.runtime.pipeline.PipelineConfig.sigma`),
+at most 6 px × min(H, W)/480 (the robust extractor's ceiling). One σ for both stripes:
+the wider one's. Each σ is a static setting of its own compiled program, built once per
+tracker (0.9 s from a warm persistent cache, ≈ 12 s cold) and kept, so a σ is never
+compiled per frame; the default rig's clean stripe (FWHM 4.4–4.8 px, s ≈ 1.9–2.0) keeps
+σ 2 and its start-up program.
+
+Rig audit (`experiments/rig_sigma.py`: T scenes, clean / sunny by seed parity, seeds
+8800–8805, a cold and a tracking frame each, the tracker's pipeline; gross = centres
+> 1 mm from the truth in 3-D, per stripe and frame, mean (range); median error, median
+over frames (range)), before (σ 2) → after (this rule), horizontal / vertical stripe:
+
+- default 640×480 rig: clean frames keep σ 2 (identical); sunny frames (FWHM 6.5–7.2 px,
+  clipped cores) get σ 3: gross 4.4 (0–14) / 2.5 (0–6) → 1.2 (0–7) / 0.6 (0–4), median
+  0.115 / 0.134 → 0.102 / 0.117 mm over all 12 frames;
+- 640×480 with a 1.6× longer lens (FWHM 6.1–11.2 px, σ 3–5): gross 12.4 (0–34) /
+  7.9 (1–20) → 1.2 (0–8) / 1.8 (0–10), median 0.138 / 0.180 → 0.063 / 0.087 mm;
+- 1280×720 at twice the focal length (FWHM 7.1–13.2 px, σ 3.5–5.5): σ 2: gross 29.6 (2–91)
+  / 24.6 (0–82), median 0.170 / 0.210 mm; the frame-size rule's σ 3 (seeds 8804–8805,
+  cold frames): 0–5 gross, 0.15–0.21 mm; this rule 4.0 (0–12) / 2.7 (0–13),
+  0.065 / 0.081 mm;
+- 320×240 at half the focal length (FWHM 2.6–4.3 px): σ 2 kept, identical (0.8 / 1.1 gross);
+- thick laser (sheet 3.6 mm FWHM, stripe 16–23 px): σ 2 gives 267–321 / 202–301 gross;
+  σ 7 (uncapped rule) on seed 8800: 0 / 0–12 gross, median 0.17 / 0.27 mm.
+Where one stripe is much narrower than the other (1.6× lens, seed 8805: 10.6 / 6.1 px),
+the narrower one keeps some gross centres at the wider one's σ (10 per frame at σ 4.5
+against 15–20 at σ 2): a σ per stripe would need a second static σ in the pipeline.
 """
 
 from __future__ import annotations
@@ -83,11 +119,13 @@ def stripe_widths(rgb: np.ndarray, weights, stride: int = 4) -> tuple[float, flo
     return stripe_width(rgb, weights, 0, stride), stripe_width(rgb, weights, 1, stride)
 
 
-def choose_sigma(width_px: float, floor: float, ceiling: float = SIGMA_MAX) -> float:
-    """Steger's σ for a stripe of FWHM `width_px`: its profile std, on a `STEP` grid, within
-    [`floor`, `ceiling`] (module docstring); `floor` when the width is unknown."""
+def choose_sigma(width_px: float, floor: float, size: int = 480) -> float:
+    """Steger's σ for a stripe of FWHM `width_px`: its profile std on a `STEP` grid, at least
+    `floor`, at most `SIGMA_MAX` × `size`/480 above 480 px (`size`: the frame's smaller side;
+    module docstring); `floor` when the width is unknown."""
     if not math.isfinite(width_px):
         return floor
+    ceiling = SIGMA_MAX * max(1.0, size / 480)
     return float(min(max(floor, round(width_px / FWHM_PER_STD / STEP) * STEP), ceiling))
 
 

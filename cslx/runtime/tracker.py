@@ -78,6 +78,10 @@ still sees the followed weld), is ignored; sightings where the two stripes cross
 `junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
 outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
+Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes,
+the stripes' width is measured and σ chosen for it (`cslx.runtime.stripe_width`: the rule
+and the rig audit); a σ other than the configured one is compiled once and kept.
+
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
 """
@@ -335,7 +339,7 @@ class Tracker:
             return  # no stripe to measure: the next frame tries again
         self._sigma_pending = False
         self.stripe_width_px = widths
-        sigma = choose_sigma(max(widths), self.sigma0)
+        sigma = choose_sigma(max(widths), self.sigma0, min(self.image_shape[:2]))
         if sigma != self.sigma:
             self._log(f"tracker: stripes {widths[0]:.1f} / {widths[1]:.1f} px wide: σ {sigma:g} px")
             self._compiled, self.sigma = self._program(sigma), sigma

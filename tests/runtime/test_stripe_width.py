@@ -48,7 +48,7 @@ def test_no_stripe_keeps_the_floor():
     assert choose_sigma(np.nan, 2.0) == 2.0
     assert choose_sigma(4.6, 2.0) == 2.0  # the default rig's clean stripe (s ≈ 1.95 px)
     assert choose_sigma(7.4, 2.0) == 3.0
-    assert choose_sigma(40.0, 2.0) == 6.0
+    assert choose_sigma(40.0, 2.0) == 6.0 and choose_sigma(40.0, 3.0, 720) == 9.0
 
 
 def test_with_frame_sigma_undoes_the_frame_scaling():
