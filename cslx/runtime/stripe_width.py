@@ -32,8 +32,20 @@ over frames (range)), before (σ 2) → after (this rule), horizontal / vertical
   cold frames): 0–5 gross, 0.15–0.21 mm; this rule 4.0 (0–12) / 2.7 (0–13),
   0.065 / 0.081 mm;
 - 320×240 at half the focal length (FWHM 2.6–4.3 px): σ 2 kept, identical (0.8 / 1.1 gross);
-- thick laser (sheet 3.6 mm FWHM, stripe 16–23 px): σ 2 gives 267–321 / 202–301 gross;
-  σ 7 (uncapped rule) on seed 8800: 0 / 0–12 gross, median 0.17 / 0.27 mm.
+- thick laser (sheet 3.6 mm FWHM, stripe 14–23 px): σ 2 gives 278 (208–321) / 248
+  (199–301) gross, median 1.68 / 1.60 mm; the rule without its ceiling (σ 6–10): 12.8 (0–41)
+  / 15.3 (0–32), 0.128 / 0.248 mm;
+- thin laser (sheet 0.25 mm, lens blur 0.4 px; FWHM 1–2 px): σ 2 kept, identical (2.7 /
+  0.2 gross, 0.040 / 0.042 mm);
+- green laser: the tracker's R − G space sees it dark (60.8 / 39.2 gross at any σ): a
+  colour-space matter, not σ's.
+Tracker over the rendered T approaches of `experiments/tracking_sequences.py` (dev seed
+7301, beside / flank, 48 frames, odometry), σ 2 → this rule: clean runs keep σ 2 and are
+identical; offset error mean (max), mm: sunny (σ 3) 0.143 (0.425) → 0.081 (0.287) and
+0.137 (0.407) → 0.073 (0.210); shadow (σ 2.5) 0.225 (0.458) → 0.111 (0.332) and
+0.078 (0.236) → 0.065 (0.242); glare (σ 2.5) 0.069 (0.172) → 0.068 (0.192) and
+0.087 (0.189) → 0.091 (0.189); heading error mean 0.546 → 0.346° (sunny beside),
+0.726 → 0.312° (shadow beside), flank glare 0.158 → 0.157° (max 0.79 → 1.16°).
 Where one stripe is much narrower than the other (1.6× lens, seed 8805: 10.6 / 6.1 px),
 the narrower one keeps some gross centres at the wider one's σ (10 per frame at σ 4.5
 against 15–20 at σ 2): a σ per stripe would need a second static σ in the pipeline.
