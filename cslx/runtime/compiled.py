@@ -30,10 +30,11 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import os
 import pathlib
 
-__all__ = ["compile_cached", "source_digest", "tree_digest"]
+__all__ = ["cached_program", "compile_cached", "source_digest", "tree_digest"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -86,48 +87,103 @@ def compile_cached(fn, args: tuple, out_like, key: str, directory: str | os.Path
     """
     import jax
 
-    directory = directory or jax.config.jax_compilation_cache_dir
-    try:
-        import flatbuffers  # noqa: F401  (jax.export's serialisation needs it)
-    except ImportError:
-        directory = None
-    if not directory:
-        return jax.jit(fn).lower(*args).compile()
-    import jaxlib
-
     in_leaves, in_tree = jax.tree_util.tree_flatten(args)
     out_tree = jax.tree_util.tree_structure(out_like)
 
-    def flat(*leaves):
-        out = fn(*jax.tree_util.tree_unflatten(in_tree, leaves))
-        out_leaves, tree = jax.tree_util.tree_flatten(out)
-        if tree != out_tree:
-            raise ValueError(f"compile_cached: result structure {tree} is not {out_tree}")
-        return tuple(out_leaves)
+    def build():
+        def flat(*leaves):
+            out = fn(*jax.tree_util.tree_unflatten(in_tree, leaves))
+            out_leaves, tree = jax.tree_util.tree_flatten(out)
+            if tree != out_tree:
+                raise ValueError(f"compile_cached: result structure {tree} is not {out_tree}")
+            return tuple(out_leaves)
 
-    platform = jax.default_backend()
-    ident = "|".join(
-        [key, tree_digest(args), str(out_tree), source_digest(), jax.__version__,
-         jaxlib.__version__, platform]
-    )  # fmt: skip
-    name = hashlib.sha256(ident.encode()).hexdigest()[:32]
-    path = pathlib.Path(directory) / "cslx-export" / f"{name}.jaxexport"
-    exported = None
-    if path.is_file():
-        try:
-            exported = jax.export.deserialize(bytearray(path.read_bytes()))
-        except Exception:  # a truncated or foreign file: export again
-            exported = None
-    if exported is None:
-        exported = jax.export.export(jax.jit(flat))(*in_leaves)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_bytes(exported.serialize())
-        os.replace(tmp, path)
-    compiled = jax.jit(exported.call).lower(*in_leaves).compile()
+        return flat, in_leaves, {}
+
+    ident = f"{key}|{tree_digest(args)}|{out_tree}"
+    compiled, _, _ = cached_program(ident, build, directory)
 
     def call(*a):
         out = compiled(*jax.tree_util.tree_leaves(a))
         return jax.tree_util.tree_unflatten(out_tree, out)
 
     return call
+
+
+def cached_program(key: str, build, directory: str | os.PathLike | None = None):
+    """A compiled flat program with its example arguments, reloaded without calling ``build``.
+
+    Args:
+        key: text naming everything the program and its example arguments depend on (the
+            source of cslx, the JAX version and the platform are added here).
+        build: ``build() -> (fn, args, meta)``: ``fn`` takes the flat ``args`` (arrays, or
+            `jax.ShapeDtypeStruct`s for inputs given only by shape) and returns a tuple of
+            arrays; ``meta`` is a JSON-able dict. Called only when the program is not on disk
+            (or without a cache folder), so its imports and tracing cost nothing at a cached
+            start.
+        directory: as in `compile_cached`.
+
+    Returns:
+        ``(call, args, meta)``: the compiled program (``call(*args) -> tuple``), the example
+        arguments (concrete ones as device arrays, the others as `jax.ShapeDtypeStruct`s) and
+        ``meta``; all three kept in one file, so a reload needs neither ``build`` nor the
+        modules it imports.
+    """
+    import jax
+    import numpy as np
+
+    directory = directory or jax.config.jax_compilation_cache_dir
+    try:
+        import flatbuffers  # noqa: F401  (jax.export's serialisation needs it)
+    except ImportError:
+        directory = None
+    if not directory:
+        fn, args, meta = build()
+        return jax.jit(fn).lower(*args).compile(), tuple(args), meta
+    import jaxlib
+
+    platform = jax.default_backend()
+    ident = "|".join(
+        [key, source_digest(), jax.__version__, jaxlib.__version__, platform]
+    )  # fmt: skip
+    name = hashlib.sha256(ident.encode()).hexdigest()[:32]
+    path = pathlib.Path(directory) / "cslx-export" / f"{name}.npz"
+    loaded = _load(path) if path.is_file() else None
+    if loaded is None:
+        fn, args, meta = build()
+        exported = jax.export.export(jax.jit(fn))(*args)
+        concrete = {
+            f"arg{i}": np.asarray(a)
+            for i, a in enumerate(args)
+            if not isinstance(a, jax.ShapeDtypeStruct)
+        }
+        blob = np.frombuffer(bytes(exported.serialize()), np.uint8)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
+        np.savez(tmp, exported=blob, meta=np.asarray(json.dumps(meta)), **concrete)
+        os.replace(tmp, path)
+        args = tuple(args)
+    else:
+        exported, args, meta = loaded
+    specs = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in exported.in_avals]
+    return jax.jit(exported.call).lower(*specs).compile(), args, meta
+
+
+def _load(path: pathlib.Path):
+    """(exported, args, meta) from a `cached_program` file; None if it cannot be read."""
+    import jax
+    import numpy as np
+
+    try:
+        with np.load(path) as z:
+            exported = jax.export.deserialize(bytearray(z["exported"].tobytes()))
+            meta = json.loads(str(z["meta"]))
+            args = tuple(
+                jax.device_put(z[f"arg{i}"])
+                if f"arg{i}" in z.files
+                else jax.ShapeDtypeStruct(a.shape, a.dtype)
+                for i, a in enumerate(exported.in_avals)
+            )
+    except Exception:  # a truncated or foreign file: export again
+        return None
+    return exported, args, meta

@@ -260,8 +260,7 @@ class Tracker:
         import jax
         import jax.numpy as jnp
 
-        from . import pipeline as pl
-        from .compiled import compile_cached, tree_digest
+        from .compiled import cached_program, tree_digest
 
         self._log = _logger(log)
         # float32 is the speed path (docs/metrics.md, performance notes). The cast runs in
@@ -271,7 +270,7 @@ class Tracker:
             lambda x: jax.device_put(np.asarray(x, np.float32)) if isinstance(x, jax.Array) else x,
             sensor,
         )
-        self.config = config or tracking_config()
+        self._config = config
         self.kalman = kalman or KalmanConfig()
         self.gates = gates or FrameGates()
         self.speed_mm_s = float(speed_mm_s)
@@ -279,25 +278,38 @@ class Tracker:
         width, height = self.sensor.camera.image_size
         self.image_shape = (int(height), int(width), 3)
         self.x_ref = float(np.asarray(self._stripe_x(), float))
-        self._fields = (*pl.SUMMARY_FIELDS, *EXTRA_FIELDS)
-        # One small program instead of ≈ 8 eager ones at start-up (cslx.runtime.compiled).
-        init = jax.jit(pl.init_state, static_argnums=(0, 1, 2))
-        self._state0 = init(self.config, (width, height), jnp.float32)
+        sensor32 = self.sensor
+        shape = self.image_shape
 
-        sensor32, config_ = self.sensor, self.config
+        def build():
+            # Only when the program is not in the cache folder: a cached start-up neither
+            # imports the pipeline (equinox modules, MED, Steger, weld: ≈ 0.1–0.2 s) nor
+            # traces it; the initial state and the summary's field names come from the file.
+            from . import pipeline as pl
 
-        def _step(rgb, state):
-            result, new = pl._process(sensor32, config_, rgb, state, roi)
-            fv = result.feature_v
-            extra = jnp.stack([fv.height, fv.width]).astype(jnp.float32)
-            summary = jnp.concatenate([pl.frame_summary(result), extra])
-            return (summary, result.points_h, result.points_v), new
+            config_ = self.config
+            init = jax.jit(pl.init_state, static_argnums=(0, 1, 2))
+            state0 = init(config_, (width, height), jnp.float32)
+            leaves, treedef = jax.tree_util.tree_flatten(state0)
+
+            def step(rgb, *state):
+                result, new = pl._process(sensor32, config_, rgb, treedef.unflatten(state), roi)
+                fv = result.feature_v
+                extra = jnp.stack([fv.height, fv.width]).astype(jnp.float32)
+                summary = jnp.concatenate([pl.frame_summary(result), extra])
+                return (summary, result.points_h, result.points_v, *jax.tree_util.tree_leaves(new))
+
+            spec = jax.ShapeDtypeStruct(shape, jnp.uint8)
+            return step, (spec, *leaves), {"fields": [*pl.SUMMARY_FIELDS, *EXTRA_FIELDS]}
 
         t0 = time.perf_counter()
-        spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
-        key = f"tracker|{self.config!r}|{roi}|{tree_digest(self.sensor)}"
-        out_like = ((0, 0, 0), self._state0)
-        self._compiled = compile_cached(_step, (spec, self._state0), out_like, key)
+        # The default configuration is named, not built: building it imports the pipeline.
+        # A change of `tracking_config` changes the source digest in the file name.
+        setting = "tracking_config()" if config is None else repr(config)
+        key = f"tracker|{setting}|{roi}|{shape}|{tree_digest(self.sensor)}"
+        self._compiled, args, meta = cached_program(key, build)
+        self._state0 = tuple(args[1:])
+        self._fields = tuple(meta["fields"])
         self.compile_s = time.perf_counter() - t0
         cache = jax.config.jax_compilation_cache_dir
         self._log(
@@ -305,6 +317,14 @@ class Tracker:
             + (f" (persistent cache {cache})" if cache else " (no persistent compile cache)")
         )
         self.reset()
+
+    @property
+    def config(self):
+        """The pipeline's settings (`cslx.runtime.pipeline.PipelineConfig`); default
+        `tracking_config()`, built on first use."""
+        if self._config is None:
+            self._config = tracking_config()
+        return self._config
 
     @classmethod
     def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
@@ -476,7 +496,8 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        (summary, points_h, points_v), self._state = self._compiled(frame, self._state)
+        summary, points_h, points_v, *state = self._compiled(frame, *self._state)
+        self._state = tuple(state)
         raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
         obs.raw = raw
         obs.med_steps = int(raw["med_steps_h"] + raw["med_steps_v"])
