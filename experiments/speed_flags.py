@@ -34,9 +34,8 @@ FLAGS = {
     "eigen single-threaded": "--xla_cpu_multi_thread_eigen=false",
     "no XNNPACK/YNNPACK fusions": "--xla_cpu_experimental_xnn_fusion_type= "
     "--xla_cpu_experimental_ynn_fusion_type=",
-    "optimise for size": "--xla_cpu_optimize_for_size=true",
     "concurrency-optimised scheduler": "--xla_cpu_enable_concurrency_optimized_scheduler=true",
-    "no loop unrolling": "--xla_cpu_disable_loop_unrolling=true",
+    "one codegen split": "--xla_cpu_parallel_codegen_split_count=1",
     "fast min/max": "--xla_cpu_enable_fast_min_max=true",
 }
 
