@@ -3,7 +3,8 @@
 `Tracker.from_calibration(path_or_sensor)` compiles `cslx.runtime.pipeline` once at start-up (the
 compile time is logged; with JAX's persistent compilation cache, which the entry point sets
 with `cslx.environment.configure(compile_cache=...)`, a second start-up loads the program
-instead of compiling it), then `step(frame)` runs one
+instead of compiling it, without importing or tracing the pipeline: `cslx.runtime.compiled`),
+then `step(frame)` runs one
 frame: the pipeline state (MED filters warm-started frame to frame, the tracking bands) stays
 on the device, and one small vector (`cslx.runtime.pipeline.SUMMARY_FIELDS`) comes back to the host.
 
