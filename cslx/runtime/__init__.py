@@ -14,6 +14,7 @@ Nothing here imports the simulation (`cslx.sim`): a robot without a renderer run
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 #: Public name → the submodule that defines it, imported on first use (`__getattr__`):
 #: importing the package loads no submodule, so the robot's start-up imports only what it
@@ -108,6 +109,8 @@ def __getattr__(name: str):
         value = module if owner is None else getattr(module, name)
         globals()[name] = value
         return value
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f"{__name__}.{name}")  # a submodule, as `pkg.pipeline`
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
