@@ -34,7 +34,14 @@ correction of the curvature bias of the smoothing along the stripe (c''σ²/2 fr
 made every figure slightly worse. The p95 is left at the bead's corners, where the 6 px
 smoothing along the stripe has already rounded the profile before the path is formed.
 
-Pure JAX (the moments of all windows in one grouped correlation, closed-form 3×3 inverse),
+One-sided windows (`smooth_path(sided=True)`): the windows j − h … j and j … j + h are fitted
+too, each side's window chosen by the ICI rule, and the three estimates are averaged with
+weights 1 / sd² (the directional LPA-ICI of Katkovnik, Egiazarian & Astola 2006, fused as
+if independent). A centre next to a corner, whose symmetric window must stay short, then
+averages the plate on its own side; see `cslx.segmentation.refine.second_pass` for the
+development figures.
+
+Pure JAX (the moments of all windows in one matrix product, closed-form 3×3 inverse),
 jit- and vmap-able; ≈ 1 ms per path on the development CPU.
 """
 
@@ -54,43 +61,50 @@ GAMMA = 2.0
 CORRELATION = 4.0
 
 
-def _kernels(halves) -> np.ndarray:
-    """(2·P, 1, 2·h_max + 1) correlation kernels (m/h)^p on |m| ≤ h: first the five powers
-    0–4 of every window (applied to the weights), then the powers 0–2 (to weights × values),
-    padded with zero kernels to P = 5 per window each."""
+def _kernels(halves, side: int = 0) -> np.ndarray:
+    """(2·P, 1, 2·h_max + 1) correlation kernels (m/h)^p on |m| ≤ h (side 0; side −1: only
+    −h ≤ m ≤ 0, side 1: only 0 ≤ m ≤ h): first the five powers 0–4 of every window (applied
+    to the weights), then the powers 0–2 (to weights × values), padded with zero kernels to
+    P = 5 per window each."""
     r = max(halves)
     m = np.arange(-r, r + 1, dtype=float)
     first, second = [], []
     for h in halves:
-        inside = np.abs(m) <= h
+        inside = (np.abs(m) <= h) & (side * m >= 0)
         first += [np.where(inside, (m / h) ** p, 0.0) for p in range(5)]
         second += [np.where(inside, (m / h) ** p, 0.0) for p in range(3)]
     second += [np.zeros_like(m)] * (len(first) - len(second))
     return np.stack(first + second)[:, None, :]
 
 
-def _moments(w, wy, halves):
-    """Σ_{m=−h..h} x[j+m] (m/h)^p (zero padded) of x = w (p ≤ 4) and x = w·y (p ≤ 2) for
-    every window, in the windows' own coordinates: one grouped correlation. Returns
+def _moments(w, y, halves, side: int = 0):
+    """Σ_{m=−h..h} w[j+m] (m/h)^p (p ≤ 4) and Σ w[j+m] (y[j+m] − y[j]) (m/h)^p (p ≤ 2),
+    zero padded, for every window, in the windows' own coordinates and relative to the
+    centre's own value (float32-safe: the sums of y ≈ 300 px lost ≈ 1e-5 px to rounding,
+    enough to flip a window choice between a batched and a single call). The (N, 2r + 1)
+    windows times the kernels, a matrix product (XLA's CPU grouped convolution took ≈ 25 ms
+    for the 10 windows up to ±256 of the second pass, three sides). Returns
     ((H, 5, N), (H, 3, N))."""
     r, n_h = max(halves), len(halves)
-    kernel = jnp.asarray(_kernels(halves), w.dtype)
-    x = jnp.stack([w, wy])[None]  # (1, 2, N)
-    out = lax.conv_general_dilated(x, kernel, (1,), [(r, r)], feature_group_count=2)[0]
-    s = out[: 5 * n_h].reshape(n_h, 5, -1)
-    t = out[5 * n_h : 8 * n_h].reshape(n_h, 3, -1)
-    return s, t
+    kernel = jnp.asarray(_kernels(halves, side)[:, 0, :], w.dtype)  # (2·5H, 2r + 1)
+    n = w.shape[-1]
+    rows = jnp.arange(n)[:, None] + jnp.arange(2 * r + 1)[None, :]  # (N, 2r + 1)
+    ww = jnp.pad(w, (r, r))[rows]
+    dy = ww * (jnp.pad(y, (r, r))[rows] - y[:, None])
+    half = 5 * n_h
+    s = jnp.einsum("nm,km->kn", ww, kernel[:half], precision="highest")
+    t = jnp.einsum("nm,km->kn", dy, kernel[half : half + 3 * n_h], precision="highest")
+    return s.reshape(n_h, 5, -1), t.reshape(n_h, 3, -1)
 
 
-def _window_fits(pos, valid, support, halves):
+def _window_fits(pos, valid, support, halves, side: int = 0):
     """Value at each valid centre of the local quadratic through the `support` centres within
     ±h (every h of `halves`) and its white-noise variance factor (M⁻¹)₀₀: (estimate, factor),
     each (H, N), NaN / inf where the window holds too few support centres."""
     w = support.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
-    (s0, s1, s2, s3, s4), t = (jnp.moveaxis(a, 1, 0) for a in _moments(w, w * y, halves))
-    # Σ w (y_{j+m} − y_j) (m/h)^p: the fit relative to the centre's own value (float32-safe).
-    t0, t1, t2 = t[0] - y * s0, t[1] - y * s1, t[2] - y * s2
+    moments = _moments(w, y, halves, side)
+    (s0, s1, s2, s3, s4), (t0, t1, t2) = (jnp.moveaxis(a, 1, 0) for a in moments)
     c00 = s2 * s4 - s3 * s3
     c01 = s2 * s3 - s1 * s4
     c02 = s1 * s3 - s2 * s2
@@ -102,7 +116,15 @@ def _window_fits(pos, valid, support, halves):
 
 
 def smooth_path(
-    pos, valid, scatter, *, support=None, gamma=GAMMA, correlation=CORRELATION, halves=HALVES
+    pos,
+    valid,
+    scatter,
+    *,
+    support=None,
+    gamma=GAMMA,
+    correlation=CORRELATION,
+    halves=HALVES,
+    sided: bool = False,
 ):
     """Local-quadratic path smoothing with per-centre windows by the ICI rule (module docstring).
 
@@ -115,14 +137,34 @@ def smooth_path(
             the image border, where the smoothing along the stripe is biased).
         gamma, correlation: Γ and c of the module docstring.
         halves: half windows, shortest first (static).
+        sided: also fit one-sided windows (j − h … j and j … j + h), choose each side's
+            window by the ICI rule too, and return the inverse-variance mean of the three
+            estimates (static; the linked detector's second pass,
+            `cslx.segmentation.refine.second_pass`).
 
     Returns:
         (smoothed pos, factor): factor (N,) ≤ 1 is the ratio of the chosen estimate's std to
-        one centre's, √min(c (M⁻¹)₀₀, 1) (1 where nothing was averaged); invalid centres are
-        returned as they were.
+        one centre's, √min(c (M⁻¹)₀₀, 1) (1 where nothing was averaged; with `sided` that of
+        the combination, as if the three were independent); invalid centres are returned as
+        they were.
     """
     support = valid if support is None else support & valid
-    est, var = _window_fits(pos, valid, support, halves)  # (H, N)
+    sides = (0, -1, 1) if sided else (0,)
+    num = den = 0.0
+    fits = [_ici(pos, valid, support, scatter, gamma, correlation, halves, side) for side in sides]
+    for chosen, f, use in fits:
+        w = jnp.where(use, 1.0 / jnp.maximum(f, 1e-3) ** 2, 0.0)
+        num = num + w * jnp.where(use, chosen, 0.0)
+        den = den + w
+    use = valid & (den > 0)
+    out = num / jnp.where(use, den, 1.0)
+    return jnp.where(use, out, pos), jnp.where(use, jnp.sqrt(1.0 / jnp.where(use, den, 1.0)), 1.0)
+
+
+def _ici(pos, valid, support, scatter, gamma, correlation, halves, side):
+    """The ICI rule over the windows of one side (`smooth_path`): (estimate, its std factor,
+    whether a window was usable), each (N,)."""
+    est, var = _window_fits(pos, valid, support, halves, side)  # (H, N)
     # One centre's own noise bounds a fit through it; an extrapolation (a centre outside the
     # support) can be worse than that.
     factor = jnp.sqrt(jnp.where(support, jnp.minimum(correlation * var, 1.0), correlation * var))
@@ -138,4 +180,4 @@ def smooth_path(
     chosen = jnp.take_along_axis(jnp.where(good, est, 0.0), pick, 0)[0]
     f = jnp.take_along_axis(factor, pick, 0)[0]
     use = valid & (best >= 0)
-    return jnp.where(use, chosen, pos), jnp.where(use, f, 1.0)
+    return chosen, jnp.where(use, f, 1.0), use

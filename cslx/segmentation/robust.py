@@ -77,7 +77,7 @@ the same frame with the laser off) around the true row with σ 2.5 px and no smo
 along the stripe scores, on the clean scenes, median 0.020 / 0.030 mm and p95 0.068 /
 0.092 mm (sampling bias of a ≈ 1 px wide profile, which smoothing along a tilted stripe
 averages out): the goal's median is near that floor even without speckle.
-7. Second pass (`_second`, `cslx.segmentation.refine`): the centres are re-measured around
+7. Second pass (`refine.second_pass`): the centres are re-measured around
    the smoothed path, with the smoothing (`SIGMA_REFINE`) along the path instead of the
    image axis, then smoothed again. Development frames, H / V: p95 0.190 / 0.224 →
    0.173 / 0.198 mm (corners median 0.176 / 0.201 → 0.136 / 0.168 mm, bead 0.097 / 0.100 →
@@ -107,6 +107,15 @@ averages out): the goal's median is near that floor even without speckle.
    0.027–0.056 / 0.027–0.069 px (mean 0.045 → 0.043), largest distance 0.250 → 0.242 px.
    Cost (sunny and clean frames, same run, load 15.8): 75.7 / 79.9 → 79.5 / 85.3 ms per
    frame and stripe.
+   The final smoothing of the second pass also fits one-sided windows (a centre next to a
+   bead corner averages the plate on its own side) up to ±256 centres with c = 6
+   (`refine.second_pass` has the variants). Development frames (same 36 frames, H / V):
+   median 0.038 / 0.043 → 0.035 / 0.039 mm, p95 0.169 / 0.191 → 0.153 / 0.169 mm (pixel
+   error medians: corners 0.137 → 0.094, border 0.072 → 0.053, plate 0.033 → 0.030, bead
+   0.080 → 0.076 px), detection unchanged, gross 0.004 / 0.070 → 0.026 / 0.075 %. Flat wall
+   (seeds 41–46): RMS 0.027–0.069 → 0.019–0.066 px (mean 0.043 → 0.037), largest distance
+   0.242 → 0.241 px. Cost: the smoothing 1.0 → 3.7 ms per stripe (load 11; whole frames
+   under that load scattered 47–133 ms per frame and stripe, before and after alike).
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
@@ -125,7 +134,7 @@ import numpy as np
 from jax import lax
 
 from .path import smooth_path
-from .refine import refine_centres
+from .refine import second_pass
 from .ridges import PATH_HALF_WINDOW, LinkParams, _median, _path_scatter, linked_centres
 from .steger import Centres
 
@@ -466,7 +475,7 @@ def linked_extract(
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
     if REFINE:
-        pos = _second(mono2, pos, valid, bridged, sigma=final, axis=axis)
+        pos = second_pass(mono2, pos, valid, bridged, sigma=final, axis=axis)
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )
@@ -503,29 +512,6 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
-#: Smoothing along the path (px) of the second pass. Development frames (seeds 7100–7117,
-#: 2 frames × 18 conditions, H / V p95 mm; without the second pass 0.190 / 0.224): with the
-#: first pass's 9 px border margin 0 / 2 / 3 / 4 / 6 px → 0.283 / 0.322 (gross 0.12 / 0.29 %),
-#: 0.220 / 0.250, 0.207 / 0.230, 0.195 / 0.220, 0.180 / 0.203; without it (as used) 6 / 8 px →
-#: 0.173 / 0.198 and 0.171 / 0.198, medians 0.039 / 0.046 and 0.041 / 0.048 mm.
-SIGMA_REFINE = 6.0
-
-
-@functools.partial(jax.jit, static_argnames=("sigma", "axis"))
-def _second(mono, pos, valid, bridged, *, sigma: float, axis: int):
-    """Second pass (module docstring, step 7): centres re-measured along the first pass's
-    smoothed path (`refine.refine_centres`), then smoothed again (`path.smooth_path`).
-
-    Bridged centres keep the first pass's line. No border margin: the smoothing along the
-    path is normalised over the centres it has, so it does not mirror the image at the
-    border (development frames, border centres H / V p95 0.276 / 0.497 mm with the first
-    pass's 9 px margin, 0.187 / 0.330 mm without)."""
-    use = valid & ~bridged
-    # refine_centres keeps `pos` wherever `use` is False or nothing was found
-    new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis)
-    scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
-    smoothed, _ = smooth_path(jnp.nan_to_num(new), valid, scatter, support=use)
-    return jnp.where(use, smoothed, pos)
 
 
 #: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.
