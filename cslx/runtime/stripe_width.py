@@ -39,6 +39,13 @@ over frames (range)), before (σ 2) → after (this rule), horizontal / vertical
   0.2 gross, 0.040 / 0.042 mm);
 - green laser: the tracker's R − G space sees it dark (60.8 / 39.2 gross at any σ): a
   colour-space matter, not σ's.
+Held out (seeds 8810–8813, never used to choose the rule; the ceiling applied): default
+rig 4.5 (0–11) / 1.6 (0–5) → 0.2 (0–1) / 0.1 (0–1), median 0.111 / 0.145 → 0.098 /
+0.122 mm; 1.6× lens 14.2 (0–32) / 5.8 (0–11) → 0.2 (0–1) / 0.1 (0–1), 0.129 / 0.150 →
+0.059 / 0.081 mm; thick laser 267.5 (211–319) / 233.0 (171–286) → 28.0 (1–61) / 18.5
+(6–29), 2.03 / 1.26 → 0.172 / 0.224 mm at the ceiling σ 6 (better, not solved: a
+16–23 px stripe wants σ 7–10 and a tracking band wider than 64 rows).
+
 Tracker over the rendered T approaches of `experiments/tracking_sequences.py` (dev seed
 7301, beside / flank, 48 frames, odometry), σ 2 → this rule: clean runs keep σ 2 and are
 identical; offset error mean (max), mm: sunny (σ 3) 0.143 (0.425) → 0.081 (0.287) and
