@@ -10,8 +10,8 @@ clipped core is a wide plateau) and the light, so the tracker (`cslx.runtime.tra
 Tracker`) measures it: on the first frame after a start or `reset` with both stripes, the
 median FWHM of the column (row) profiles (`stripe_widths`, every 4th profile, ≈ 3 ms at
 640×480), and σ = FWHM / 2.355 (the profile's std) on a 0.5 px grid (`choose_sigma`), at
-most 6 px × min(H, W)/480 (the robust extractor's ceiling), once s is at least 1.7 × the
-configured σ (`SWITCH`; 2 px at 640×480, `cslx.runtime.pipeline.PipelineConfig.sigma`);
+most 6 px × min(H, W)/480 (the robust extractor's ceiling), once s exceeds the configured σ
+by 1.8 px or more (`SWITCH`; 2 px at 640×480, `cslx.runtime.pipeline.PipelineConfig.sigma`);
 narrower stripes keep the configured σ. One σ for both stripes: the wider one's. Each σ is
 a static setting of its own compiled program, built once per tracker (0.9 s from a warm
 persistent cache, ≈ 12 s cold, on the first measured frame) and kept, so nothing is
@@ -29,7 +29,8 @@ over frames (range)), before (σ 2) → after (this rule), horizontal / vertical
   `experiments/tracking_sequences.py` (dev seeds 7301, 7302, 7305, 48 frames): offset error
   mean better in all 6 sunny runs (e.g. 0.257 → 0.095 mm) but worse in 5 of 6 glare runs
   (0.103 → 0.162 mm), false T reports 0 → 11 and 0 → 4 in two sunny runs, 1 → 9 in a glare
-  run. Mixed, so the default rig keeps σ 2 (its widest stripe, 7.3 px, is s = 1.55 σ);
+  run. Mixed, so the default rig keeps σ 2: its widest stripes (7.9 px, sequences of seed
+  7305, s = 3.36 px) are below the switch (8.95 px, s = 3.8 px);
 - 640×480 with a 1.6× longer lens (FWHM 6.1–11.2 px; σ 4.5–5 on the 3 sunny scenes, 2 on
   the clean ones): gross 12.4 (0–34) / 7.9 (1–20) → 1.4 (0–8) / 2.4 (0–10), median
   0.138 / 0.180 → 0.090 / 0.124 mm;
@@ -78,9 +79,9 @@ CLIP = 255
 FWHM_PER_STD = 2.0 * math.sqrt(2.0 * math.log(2.0))
 #: σ grid (px): one compiled program per σ, so few distinct values.
 STEP = 0.5
-#: σ follows the stripe only when its profile std is at least this many times `floor` (the
-#: configured σ): below, the tracker's evidence on the default rig was mixed (docstring).
-SWITCH = 1.7
+#: σ follows the stripe only when its profile std exceeds `floor` (the configured σ) by at
+#: least this much, px: below, the tracker's evidence on the default rig was mixed (docstring).
+SWITCH = 1.8
 #: Largest σ, px (`cslx.segmentation.robust.SIGMA_MAX`'s value).
 SIGMA_MAX = 6.0
 
@@ -142,9 +143,9 @@ def stripe_widths(rgb: np.ndarray, weights, stride: int = 4) -> tuple[float, flo
 
 def choose_sigma(width_px: float, floor: float, size: int = 480) -> float:
     """Steger's σ for a stripe of FWHM `width_px`: `floor` unless its profile std s is at
-    least `SWITCH` × `floor`, then s on a `STEP` grid, at most `SIGMA_MAX` × `size`/480
+    least `floor` + `SWITCH`, then s on a `STEP` grid, at most `SIGMA_MAX` × `size`/480
     (`size`: the frame's smaller side; module docstring); `floor` when the width is unknown."""
-    if not math.isfinite(width_px) or width_px / FWHM_PER_STD < SWITCH * floor:
+    if not math.isfinite(width_px) or width_px / FWHM_PER_STD < floor + SWITCH:
         return floor
     ceiling = SIGMA_MAX * max(1.0, size / 480)
     return float(min(max(floor, round(width_px / FWHM_PER_STD / STEP) * STEP), ceiling))
