@@ -34,10 +34,10 @@ over frames (range)), before (σ 2) → after (this rule), horizontal / vertical
 - 640×480 with a 1.6× longer lens (FWHM 6.1–11.2 px; σ 4.5–5 on the 3 sunny scenes, 2 on
   the clean ones): gross 12.4 (0–34) / 7.9 (1–20) → 1.4 (0–8) / 2.4 (0–10), median
   0.138 / 0.180 → 0.090 / 0.124 mm;
-- 1280×720 at twice the focal length (floor σ 3 by the frame size; the 3 sunny scenes,
-  FWHM 12.2–13.2 px, get σ 5–5.5): σ 2 there gave gross 55.7 (22–91) / 46.2 (14–82), median
-  0.153 / 0.214 mm; this rule 7.7 (0–12) / 4.8 (0–13), 0.049 / 0.060 mm (the frame-size σ 3
-  on the clean scenes 8804: 0–5 gross, 0.15–0.21 mm);
+- 1280×720 at twice the focal length (floor σ 3 by the frame size; the clean scenes, FWHM
+  7.1–9.0 px, keep it; the 3 sunny ones, 12.2–13.2 px, get σ 5–5.5): on those, σ 3 gross
+  25.8 (12–36) / 14.3 (11–18), median 0.077 / 0.102 mm → 7.7 (0–12) / 4.8 (0–13),
+  0.049 / 0.060 mm (σ 2: 55.7 / 46.2 gross);
 - 320×240 at half the focal length (FWHM 2.6–4.3 px): σ 2 kept, identical (0.8 / 1.1 gross);
 - thick laser (sheet 3.6 mm FWHM, stripe 14–23 px): σ 2 gives 278 (208–321) / 248
   (199–301) gross, median 1.68 / 1.60 mm; the rule without its ceiling (σ 6–10): 12.8 (0–41)
@@ -51,7 +51,8 @@ Held out (seeds 8810–8813, not used to choose the rule): default rig identical
 7.2 px); 1.6× lens 14.2 (0–32) / 5.8 (0–11) → 0.5 (0–2) / 0.8 (0–3), median 0.129 / 0.150
 → 0.088 / 0.109 mm; thick laser 267.5 (211–319) / 233.0 (171–286) → 28.0 (1–61) / 18.5
 (6–29), 2.03 / 1.26 → 0.172 / 0.224 mm at the ceiling σ 6 (better, not solved: a 16–23 px
-stripe wants σ 7–10 and a tracking band wider than 64 rows).
+stripe wants σ 7–10 and a tracking band wider than 64 rows). Figure 22's closed loop (dev
+seeds 2201, 2203, 2204, every nuisance): FWHM 4.5–7.5 px, σ 2 and one program throughout.
 
 Where one stripe is much narrower than the other (1.6× lens, seed 8805: 10.6 / 6.1 px),
 the narrower one keeps some gross centres at the wider one's σ (10 per frame at σ 4.5
