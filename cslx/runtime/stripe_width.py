@@ -51,7 +51,10 @@ Held out (seeds 8810–8813, not used to choose the rule): default rig identical
 7.2 px); 1.6× lens 14.2 (0–32) / 5.8 (0–11) → 0.5 (0–2) / 0.8 (0–3), median 0.129 / 0.150
 → 0.088 / 0.109 mm; thick laser 267.5 (211–319) / 233.0 (171–286) → 28.0 (1–61) / 18.5
 (6–29), 2.03 / 1.26 → 0.172 / 0.224 mm at the ceiling σ 6 (better, not solved: a 16–23 px
-stripe wants σ 7–10 and a tracking band wider than 64 rows). Figure 22's closed loop (dev
+stripe wants σ 7–10 and a tracking band wider than 64 rows); 1280×720 at twice the focal
+length, sunny seeds 8811 and 8813 (FWHM 12.6–13.6 px), frame-size σ 3 → σ 5.5–6: gross
+24–36 / 9–14 → 0 / 0 per frame, median 0.072–0.081 / 0.108–0.143 → 0.040–0.055 /
+0.062–0.079 mm. Figure 22's closed loop (dev
 seeds 2201, 2203, 2204, every nuisance): FWHM 4.5–7.5 px, σ 2 and one program throughout.
 
 Where one stripe is much narrower than the other (1.6× lens, seed 8805: 10.6 / 6.1 px),
