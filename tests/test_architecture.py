@@ -185,6 +185,20 @@ def test_runtime_import_skips_heavy_modules():
     assert out.stdout.strip() == ""
 
 
+def test_tracker_import_leaves_the_pipeline_unloaded():
+    """A cached tracker start needs neither the pipeline nor MED/Steger (cslx.runtime.compiled):
+    importing the tracker and the sensor must not load them (issue 13, start-up)."""
+    lazy = ["cslx.runtime.pipeline", "cslx.segmentation.med", "cslx.runtime.controller"]
+    code = (
+        "import sys; import cslx.runtime.tracker, cslx.sensor; "
+        f"print(','.join(m for m in {lazy!r} if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True, text=True
+    )
+    assert out.stdout.strip() == ""
+
+
 def test_cited_documents_exist():
     pattern = re.compile(r"[\w./-]*[A-Za-z0-9_-]+\.md\b")
     tracked = {p.name for p in ROOT.rglob("*.md") if ".venv" not in p.parts}

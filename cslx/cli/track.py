@@ -25,6 +25,7 @@ the headless build: it has no windows).
 from __future__ import annotations
 
 import argparse
+import gc
 import math
 import os
 import signal
@@ -277,6 +278,18 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args, log) -> int:
+    # Start-up allocates ≈ 10⁶ long-lived objects (JAX, the tracker): the cyclic garbage
+    # collector would scan them again and again while they load. It stays off until the
+    # tracker is built; then they move to the permanent generation (`gc.freeze`), so the
+    # collections between frames no longer scan them either (issue 13, start-up).
+    gc.disable()
+    try:
+        return _run_collected(args, log)
+    finally:
+        gc.enable()
+
+
+def _run_collected(args, log) -> int:
     from ..runtime import PathController, RobotLink
     from ..runtime.loop import TrackingLoop, TrackLog
     from ..sensor import CalibrationError, load_sensor
@@ -304,6 +317,8 @@ def _run(args, log) -> int:
 
             set_compile_cache(args.jax_cache)
         tracker = _compile(sensor, log)
+        gc.freeze()
+        gc.enable()
         return _loop(args, source, tracker, link, PathController(), TrackingLoop, TrackLog)
     finally:
         source.close()

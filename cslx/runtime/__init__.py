@@ -11,44 +11,54 @@ Nothing here imports the simulation (`cslx.sim`): a robot without a renderer run
   that `cslx track` and the closed-loop simulation both run.
 """
 
-from .batch import process_batch as process_batch
-from .controller import Command as Command
-from .controller import ControllerConfig as ControllerConfig
-from .controller import PathController as PathController
-from .controller import State as State
-from .controller import wheel_speeds as wheel_speeds
-from .link import RobotLink as RobotLink
-from .loop import LoopConfig as LoopConfig
-from .loop import TrackingLoop as TrackingLoop
-from .loop import TrackLog as TrackLog
-from .loop import odometry_between as odometry_between
-from .pipeline import SUMMARY_FIELDS as SUMMARY_FIELDS
-from .pipeline import FrameResult as FrameResult
-from .pipeline import PipelineConfig as PipelineConfig
-from .pipeline import PipelineState as PipelineState
-from .pipeline import frame_summary as frame_summary
-from .pipeline import init_state as init_state
-from .pipeline import process_frame as process_frame
-from .protocol import Ack as Ack
-from .protocol import Decoder as Decoder
-from .protocol import Heartbeat as Heartbeat
-from .protocol import ProtocolError as ProtocolError
-from .protocol import RobotState as RobotState
-from .protocol import Stop as Stop
-from .protocol import StopReason as StopReason
-from .protocol import VelocityCommand as VelocityCommand
-from .protocol import encode as encode
-from .tracker import LOG_FIELDS as LOG_FIELDS
-from .tracker import FrameGates as FrameGates
-from .tracker import KalmanConfig as KalmanConfig
-from .tracker import Tracker as Tracker
-from .weld import WeldConfig as WeldConfig
-from .weld import WeldFeature as WeldFeature
-from .weld import WeldLine as WeldLine
-from .weld import plate_fit as plate_fit
-from .weld import stripe_feature as stripe_feature
-from .weld import weld_features as weld_features
-from .weld import weld_line_from_features as weld_line_from_features
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
+#: Public name → the submodule that defines it, imported on first use (`__getattr__`):
+#: importing the package loads no submodule, so the robot's start-up imports only what it
+#: uses (issue 13).
+_OWNER = {
+    "process_batch": "batch",
+    "Command": "controller",
+    "ControllerConfig": "controller",
+    "PathController": "controller",
+    "State": "controller",
+    "wheel_speeds": "controller",
+    "RobotLink": "link",
+    "LoopConfig": "loop",
+    "TrackingLoop": "loop",
+    "TrackLog": "loop",
+    "odometry_between": "loop",
+    "SUMMARY_FIELDS": "pipeline",
+    "FrameResult": "pipeline",
+    "PipelineConfig": "pipeline",
+    "PipelineState": "pipeline",
+    "frame_summary": "pipeline",
+    "init_state": "pipeline",
+    "process_frame": "pipeline",
+    "Ack": "protocol",
+    "Decoder": "protocol",
+    "Heartbeat": "protocol",
+    "ProtocolError": "protocol",
+    "RobotState": "protocol",
+    "Stop": "protocol",
+    "StopReason": "protocol",
+    "VelocityCommand": "protocol",
+    "encode": "protocol",
+    "LOG_FIELDS": "tracker",
+    "FrameGates": "tracker",
+    "KalmanConfig": "tracker",
+    "Tracker": "tracker",
+    "WeldConfig": "weld",
+    "WeldFeature": "weld",
+    "WeldLine": "weld",
+    "plate_fit": "weld",
+    "stripe_feature": "weld",
+    "weld_features": "weld",
+    "weld_line_from_features": "weld",
+}
 
 __all__ = [
     "FrameResult",
@@ -90,3 +100,19 @@ __all__ = [
     "VelocityCommand",
     "encode",
 ]
+
+
+def __getattr__(name: str):
+    if name in _OWNER:
+        owner = _OWNER[name]
+        module = importlib.import_module(f"{__name__}.{owner or name}")
+        value = module if owner is None else getattr(module, name)
+        globals()[name] = value
+        return value
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f"{__name__}.{name}")  # a submodule, as `pkg.pipeline`
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), *_OWNER})

@@ -3,7 +3,8 @@
 `Tracker.from_calibration(path_or_sensor)` compiles `cslx.runtime.pipeline` once at start-up (the
 compile time is logged; with JAX's persistent compilation cache, which the entry point sets
 with `cslx.environment.configure(compile_cache=...)`, a second start-up loads the program
-instead of compiling it), then `step(frame)` runs one
+instead of compiling it, without importing or tracing the pipeline: `cslx.runtime.compiled`),
+then `step(frame)` runs one
 frame: the pipeline state (MED filters warm-started frame to frame, the tracking bands) stays
 on the device, and one small vector (`cslx.runtime.pipeline.SUMMARY_FIELDS`) comes back to the host.
 
@@ -78,6 +79,10 @@ still sees the followed weld), is ignored; sightings where the two stripes cross
 `junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
 outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
+Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes,
+the stripes' width is measured and σ chosen for it (`cslx.runtime.stripe_width`: the rule
+and the rig audit); a σ other than the configured one is compiled once and kept.
+
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
 """
@@ -97,6 +102,8 @@ import numpy as np
 from ..config import MOTION
 from .junction_track import JunctionTrack
 from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
+from .step_program import step_program
+from .stripe_width import choose_sigma, stripe_widths, with_frame_sigma
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -117,9 +124,6 @@ LOG_FIELDS = (
 )
 
 NAN = math.nan
-
-#: Values the tracker's compiled step returns after `cslx.runtime.pipeline.SUMMARY_FIELDS`.
-EXTRA_FIELDS = ("v_height_mm", "v_width_mm")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -255,13 +259,10 @@ class Tracker:
         speed_mm_s: float = MOTION.speed_mm_s,
         fps: float = MOTION.fps,
         roi: bool = True,
+        auto_sigma: bool = True,
         log: logging.Logger | Callable[[str], None] | None = None,
     ):
         import jax
-        import jax.numpy as jnp
-
-        from . import pipeline as pl
-        from .compiled import compile_cached, tree_digest
 
         self._log = _logger(log)
         # float32 is the speed path (docs/metrics.md, performance notes). The cast runs in
@@ -271,7 +272,7 @@ class Tracker:
             lambda x: jax.device_put(np.asarray(x, np.float32)) if isinstance(x, jax.Array) else x,
             sensor,
         )
-        self.config = config or tracking_config()
+        self._config = config
         self.kalman = kalman or KalmanConfig()
         self.gates = gates or FrameGates()
         self.speed_mm_s = float(speed_mm_s)
@@ -279,32 +280,61 @@ class Tracker:
         width, height = self.sensor.camera.image_size
         self.image_shape = (int(height), int(width), 3)
         self.x_ref = float(np.asarray(self._stripe_x(), float))
-        self._fields = (*pl.SUMMARY_FIELDS, *EXTRA_FIELDS)
-        # One small program instead of ≈ 8 eager ones at start-up (cslx.runtime.compiled).
-        init = jax.jit(pl.init_state, static_argnums=(0, 1, 2))
-        self._state0 = init(self.config, (width, height), jnp.float32)
+        self._roi, self.auto_sigma, self.stripe_width_px = roi, bool(auto_sigma), (NAN, NAN)
+        self._programs: dict[float, Any] = {}  # the compiled step per Steger σ (px)
+        self.sigma = self.sigma0 = self._program(None)
+        self.compile_s = self._compile_s
+        self.reset()
 
-        sensor32, config_ = self.sensor, self.config
+    def _program(self, sigma: float | None) -> float:
+        """Compile (or reload) the step with Steger's σ = `sigma` px (None: the configured
+        σ); once per σ and tracker (`cslx.runtime.step_program`). Returns its σ."""
+        import jax
 
-        def _step(rgb, state):
-            result, new = pl._process(sensor32, config_, rgb, state, roi)
-            fv = result.feature_v
-            extra = jnp.stack([fv.height, fv.width]).astype(jnp.float32)
-            summary = jnp.concatenate([pl.frame_summary(result), extra])
-            return (summary, result.points_h, result.points_v), new
-
+        height, width = self.image_shape[:2]
+        if sigma is None:  # the default configuration is named, not built (no pipeline import)
+            config = None
+            setting = "tracking_config()" if self._config is None else repr(self._config)
+        else:
+            config = with_frame_sigma(self.config, sigma, height, width)
+            setting = repr(config)
         t0 = time.perf_counter()
-        spec = jax.ShapeDtypeStruct(self.image_shape, jnp.uint8)
-        key = f"tracker|{self.config!r}|{roi}|{tree_digest(self.sensor)}"
-        out_like = ((0, 0, 0), self._state0)
-        self._compiled = compile_cached(_step, (spec, self._state0), out_like, key)
-        self.compile_s = time.perf_counter() - t0
+        compiled, args, meta = step_program(
+            self.sensor, lambda: config or self.config, setting, self._roi, self.image_shape
+        )
+        self._compile_s = time.perf_counter() - t0
+        self._state0 = tuple(args[1:])  # the same state for every σ
+        self._fields, self._weights = tuple(meta["fields"]), tuple(meta["weights"])
+        self._programs[meta["sigma"]] = compiled
         cache = jax.config.jax_compilation_cache_dir
         self._log(
-            f"tracker: compiled the {width}×{height} pipeline in {self.compile_s:.2f} s"
+            f"tracker: compiled the {width}×{height} pipeline (Steger σ {meta['sigma']:g} px) "
+            f"in {self._compile_s:.2f} s"
             + (f" (persistent cache {cache})" if cache else " (no persistent compile cache)")
         )
-        self.reset()
+        return meta["sigma"]
+
+    def _choose_sigma(self, frame: np.ndarray) -> None:
+        """Steger's σ from the stripes' width on the first frame with both (`stripe_width`)."""
+        widths = stripe_widths(frame, self._weights)
+        if not all(math.isfinite(w) for w in widths):
+            return  # no stripe to measure: the next frame tries again
+        self._sigma_pending = False
+        self.stripe_width_px = widths
+        sigma = choose_sigma(max(widths), self.sigma0, min(self.image_shape[:2]))
+        if sigma != self.sigma:
+            self._log(f"tracker: stripes {widths[0]:.1f} / {widths[1]:.1f} px wide: σ {sigma:g} px")
+            if sigma not in self._programs:
+                self._program(sigma)
+            self._compiled, self.sigma = self._programs[sigma], sigma
+
+    @property
+    def config(self):
+        """The pipeline's settings (`cslx.runtime.pipeline.PipelineConfig`); default
+        `tracking_config()`, built on first use."""
+        if self._config is None:
+            self._config = tracking_config()
+        return self._config
 
     @classmethod
     def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
@@ -357,6 +387,8 @@ class Tracker:
         self._odd_widths = 0
         self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
         self._restarts = 0
+        self._sigma_pending = self.auto_sigma  # σ is measured again after a reset
+        self.sigma, self._compiled = self.sigma0, self._programs[self.sigma0]
 
     def _carry_history(self, d: float, delta: float) -> None:
         if not len(self._hist):
@@ -476,7 +508,10 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        (summary, points_h, points_v), self._state = self._compiled(frame, self._state)
+        if self._sigma_pending:
+            self._choose_sigma(frame)
+        summary, points_h, points_v, *state = self._compiled(frame, *self._state)
+        self._state = tuple(state)
         raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
         obs.raw = raw
         obs.med_steps = int(raw["med_steps_h"] + raw["med_steps_v"])

@@ -11,46 +11,56 @@
 - `shard`: the same over frame batches and devices.
 """
 
-from . import med as med
-from .baselines import aa as aa
-from .baselines import cm as cm
-from .baselines import column_peaks as column_peaks
-from .baselines import la as la
-from .baselines import qa as qa
-from .baselines import split_and_merge as split_and_merge
-from .colour import CANDIDATES as CANDIDATES
-from .colour import DEFAULT_FORM as DEFAULT_FORM
-from .colour import NAMED_SPACES as NAMED_SPACES
-from .colour import column_kurtosis as column_kurtosis
-from .colour import kurtosis_objective as kurtosis_objective
-from .colour import monochrome as monochrome
-from .colour import optimise_weights as optimise_weights
-from .colour import parse_space as parse_space
-from .colour import search_space as search_space
-from .interface import DEFAULT_SIGMA as DEFAULT_SIGMA
-from .interface import METHODS as METHODS
-from .interface import STRIPES as STRIPES
-from .interface import centres_to_pixels as centres_to_pixels
-from .interface import extract as extract
-from .interface import monochrome_for as monochrome_for
-from .med import MEDResult as MEDResult
-from .med import default_filter_length as default_filter_length
-from .med import initial_filter as initial_filter
-from .med import med_apply as med_apply
-from .med import med_objective as med_objective
-from .med import med_prepare as med_prepare
-from .med import med_update as med_update
-from .metrics import GROSS_MM as GROSS_MM
-from .metrics import stripe_errors as stripe_errors
-from .metrics import stripe_point_errors as stripe_point_errors
-from .ridges import LinkParams as LinkParams
-from .ridges import linked_centres as linked_centres
-from .robust import linked_extract as linked_extract
-from .steger import Centres as Centres
-from .steger import gaussian_derivative as gaussian_derivative
-from .steger import sigma_for_width as sigma_for_width
-from .steger import steger_centres as steger_centres
-from .steger import steger_cross as steger_cross
+from __future__ import annotations
+
+import importlib
+import importlib.util
+
+#: Public name → the submodule that defines it, imported on first use (`__getattr__`):
+#: importing the package loads no submodule, so the robot's start-up imports only what it
+#: uses (issue 13).
+_OWNER = {
+    "med": None,  # the submodule itself
+    "aa": "baselines",
+    "cm": "baselines",
+    "column_peaks": "baselines",
+    "la": "baselines",
+    "qa": "baselines",
+    "split_and_merge": "baselines",
+    "CANDIDATES": "colour",
+    "DEFAULT_FORM": "colour",
+    "NAMED_SPACES": "colour",
+    "column_kurtosis": "colour",
+    "kurtosis_objective": "colour",
+    "monochrome": "colour",
+    "optimise_weights": "colour",
+    "parse_space": "colour",
+    "search_space": "colour",
+    "DEFAULT_SIGMA": "interface",
+    "METHODS": "interface",
+    "STRIPES": "interface",
+    "centres_to_pixels": "interface",
+    "extract": "interface",
+    "monochrome_for": "interface",
+    "MEDResult": "med",
+    "default_filter_length": "med",
+    "initial_filter": "med",
+    "med_apply": "med",
+    "med_objective": "med",
+    "med_prepare": "med",
+    "med_update": "med",
+    "GROSS_MM": "metrics",
+    "stripe_errors": "metrics",
+    "stripe_point_errors": "metrics",
+    "LinkParams": "ridges",
+    "linked_centres": "ridges",
+    "linked_extract": "robust",
+    "Centres": "steger",
+    "gaussian_derivative": "steger",
+    "sigma_for_width": "steger",
+    "steger_centres": "steger",
+    "steger_cross": "steger",
+}
 
 __all__ = [
     "med",
@@ -94,3 +104,19 @@ __all__ = [
     "stripe_errors",
     "stripe_point_errors",
 ]
+
+
+def __getattr__(name: str):
+    if name in _OWNER:
+        owner = _OWNER[name]
+        module = importlib.import_module(f"{__name__}.{owner or name}")
+        value = module if owner is None else getattr(module, name)
+        globals()[name] = value
+        return value
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f"{__name__}.{name}")  # a submodule, as `pkg.pipeline`
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted({*globals(), *_OWNER})

@@ -21,6 +21,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
@@ -56,12 +57,25 @@ class Camera(eqx.Module):
     def from_matrix(
         cls, K: ArrayLike, dist: ArrayLike, image_size: tuple[int, int] = (640, 480)
     ) -> Camera:
-        """Build from a 3×3 intrinsic matrix K and (k1, k2, p1, p2)."""
-        K = jnp.asarray(K)
-        dist = jnp.asarray(dist, dtype=K.dtype)
+        """Build from a 3×3 intrinsic matrix K and (k1, k2, p1, p2).
+
+        Concrete values are sliced in NumPy and placed with `jax.device_put`: eager `jnp`
+        indexing and casts compile a small XLA program each, read from the compile cache at
+        every start of the tracker (issue 13); traced values take the `jnp` path.
+        """
+        if isinstance(K, jax.core.Tracer) or isinstance(dist, jax.core.Tracer):
+            K = jnp.asarray(K)
+            dist = jnp.asarray(dist, dtype=K.dtype)
+            take = lambda x: x  # noqa: E731
+        else:
+            K = np.asarray(K)
+            K = K.astype(jax.dtypes.canonicalize_dtype(K.dtype))
+            dist = np.asarray(dist, dtype=K.dtype)
+            take = jax.device_put
         if dist.shape != (4,):
             raise ValueError(f"dist must hold (k1, k2, p1, p2), got shape {dist.shape}")
-        return cls(K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist, tuple(int(s) for s in image_size))
+        fx, fy, u0, v0 = (take(K[i, j]) for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))
+        return cls(fx, fy, u0, v0, take(dist), tuple(int(s) for s in image_size))
 
     @property
     def K(self) -> Float[Array, "3 3"]:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -238,9 +239,13 @@ def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None, stri
     `planes` is (P, 3) (a single (3,) plane is taken as P = 1); `stripes` names the stripe of
     each row (default ("h", "v")[:P]).
     """
-    dtype = dtype or jnp.asarray(0.0).dtype
-    camera = Camera.from_matrix(jnp.asarray(K, dtype), jnp.asarray(dist, dtype), image_size)
-    planes = jnp.asarray(planes, dtype).reshape(-1, 3)
+    dtype = dtype or jax.dtypes.canonicalize_dtype(np.float64)
+    traced = any(isinstance(x, jax.core.Tracer) for x in (K, dist, planes, R_cr, T_cr))
+    # Concrete values: NumPy, then one `jax.device_put` per leaf (no XLA program at start-up)
+    xp = jnp if traced else np
+    place = (lambda x: x) if traced else jax.device_put
+    camera = Camera.from_matrix(xp.asarray(K, dtype), xp.asarray(dist, dtype), image_size)
+    planes = xp.asarray(planes, dtype).reshape(-1, 3)
     if stripes is not None:
         stripes = tuple(_stripe_code(s) for s in stripes)
         if len(stripes) != planes.shape[0] or len(set(stripes)) != len(stripes):
@@ -251,8 +256,8 @@ def sensor_from_arrays(K, dist, planes, R_cr, T_cr, image_size, dtype=None, stri
             stripes = None  # the default order: keep one pytree structure for the cross
     return Sensor(
         camera=camera,
-        planes=planes,
-        R_cr=jnp.asarray(R_cr, dtype),
-        T_cr=jnp.asarray(T_cr, dtype),
+        planes=place(planes),
+        R_cr=place(xp.asarray(R_cr, dtype)),
+        T_cr=place(xp.asarray(T_cr, dtype)),
         stripes=stripes,
     )

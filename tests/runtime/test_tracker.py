@@ -214,3 +214,13 @@ def test_restart_keeps_the_heading_on_a_lateral_jump():
             break
     assert kf.restarts == 1
     assert kf.x[1] == before  # restarted with the heading it had
+
+
+def test_default_rig_keeps_sigma_2(tracker, frames):
+    # `cslx.runtime.stripe_width`: the default rig's clean stripes (FWHM ≈ 4.6 px) keep the
+    # configured σ and the start-up program: nothing is compiled while tracking.
+    for _, img, _ in frames:
+        tracker.reset()
+        tracker.step(img)
+        assert tracker.sigma == 2.0 and max(tracker.stripe_width_px) < 5.2
+    assert sum("compiled" in line for line in tracker.lines) == 1

@@ -8,12 +8,15 @@ import numpy as np
 import pytest
 
 from cslx.sensor import (
+    TABLE4_DIST,
+    TABLE4_K,
     CalibrationError,
     cross_projector_planes,
     default_sensor,
     load_sensor,
     plane_angle_deg,
     save_sensor,
+    sensor_from_arrays,
     sensor_to_dict,
     triangulate,
 )
@@ -178,3 +181,26 @@ def test_bad_plane_sets_named(tmp_path, mutate, message):
 def test_directory_as_calibration_file(tmp_path):
     with pytest.raises(CalibrationError, match="is a directory"):
         load_sensor(tmp_path)
+
+
+def test_sensor_from_concrete_values_compiles_nothing(caplog):
+    """Building a sensor from plain values runs no XLA program (the tracker's start-up, issue 13),
+    and a traced build (under jit) gives the same leaves."""
+    jax.config.update("jax_log_compiles", True)
+    try:
+        with caplog.at_level("WARNING"):
+            sensor = default_sensor()
+    finally:
+        jax.config.update("jax_log_compiles", False)
+    assert not [r for r in caplog.records if "Compiling" in r.getMessage()]
+    K = jnp.asarray(TABLE4_K)
+
+    def build(K):
+        s = sensor_from_arrays(K, TABLE4_DIST, sensor.planes, sensor.R_cr, sensor.T_cr, (640, 480))
+        return s.camera.fx, s.camera.v0, s.camera.dist, s.planes
+
+    for got, want in zip(jax.jit(build)(K), build(np.asarray(TABLE4_K)), strict=True):
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    v0 = np.asarray(sensor.camera.v0)
+    np.testing.assert_array_equal(v0, np.asarray(TABLE4_K, v0.dtype)[1, 2])
