@@ -30,7 +30,8 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    0.22 / 0.24 / 0.34 mm, and vertical gross 0.24 / 1.3 / 3.7 %: longer smoothing rounds the
    bead's corners, so 6 px.
 4. Linking (`cslx.segmentation.ridges.linked_centres`): K candidates per column, Viterbi
-   path, outliers and short detours dropped, predicted standard deviation per centre.
+   path, outliers and short detours dropped, predicted standard deviation per centre; short
+   pieces far off the path across a gap (`ridges.drop_stray`) dropped before and after step 5.
 5. Bridging (`_bridge`): where the other stripe's core is clipped across the whole column
    (a run longer than `MAX_RUN`, left unfilled), nothing of this stripe can be measured; the
    path there and `BRIDGE_MARGIN` px around it is replaced by the line through
@@ -135,7 +136,14 @@ from jax import lax
 
 from .path import smooth_path
 from .refine import second_pass
-from .ridges import PATH_HALF_WINDOW, LinkParams, _median, _path_scatter, linked_centres
+from .ridges import (
+    PATH_HALF_WINDOW,
+    LinkParams,
+    _median,
+    _path_scatter,
+    drop_stray,
+    linked_centres,
+)
 from .steger import Centres
 
 __all__ = [
@@ -487,7 +495,11 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
     flags, in one compiled call."""
     f = filled if axis == 0 else filled.T
     b = blind if axis == 0 else blind.T
+    valid = drop_stray(jnp.nan_to_num(pos), valid)
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
+    # a piece left at an end once the bridging dropped what was behind it
+    valid = drop_stray(jnp.nan_to_num(pos), valid)
+    pos = jnp.where(valid, pos, jnp.nan)
     if SMOOTH_PATH:
         scatter = _path_scatter(jnp.nan_to_num(pos), valid, 2 * PATH_HALF_WINDOW)
         # Within 2 SIGMA_ALONG of the image border the smoothing along the stripe mirrors

@@ -265,3 +265,32 @@ def test_linked_fills_wide_clipped_cores_on_large_frames():
 def test_linked_rejects_tiny_frames_clearly(shape):
     with pytest.raises(ValueError, match="at least"):
         extract(np.zeros(shape, np.uint8), "linked", stripe="h")
+
+
+def test_drop_stray_removes_far_pieces_across_gaps():
+    # A short piece far off the path across a gap is dropped, in the middle of the path and
+    # at its end; a gentle path with gaps, a bead-like step of a few px and a long piece
+    # off the path are kept.
+    from cslx.segmentation.ridges import drop_stray
+
+    j = np.arange(480, dtype=float)
+    pos = 470 + 0.06 * j + np.where((j > 200) & (j < 230), 6.0, 0.0)  # a 6 px bump
+    valid = np.ones(480, bool)
+    valid[[195, 196, 235, 236, 300, 301, 302]] = False
+    assert (np.asarray(drop_stray(pos, valid)) == valid).all()
+    middle = pos.copy()
+    middle[260:278] = 340.0  # 18 centres beside the crossing, gaps of 12 on both sides
+    v = valid.copy()
+    v[248:260] = v[278:290] = False
+    kept = np.asarray(drop_stray(middle, v))
+    assert not kept[260:278].any()
+    assert (kept[:260] == v[:260]).all() and (kept[278:] == v[278:]).all()
+    end = middle.copy()
+    end[290:] = 0.0
+    v[290:] = False  # the piece is now the path's end
+    assert not np.asarray(drop_stray(end, v))[260:278].any()
+    long = middle.copy()
+    long[260:300] = 340.0  # a 40-centre piece is a stretch of its own, not a stray piece
+    v = valid.copy()
+    v[248:260] = v[300:312] = False
+    assert np.asarray(drop_stray(long, v))[260:300].all()
