@@ -8,8 +8,9 @@ flanks) and Steger's detector picks the wrong one. The stripe's width in pixels 
 the rig (focal length, frame size, stand-off), the laser (sheet thickness, power: a
 clipped core is a wide plateau) and the light, so the tracker (`cslx.runtime.tracker.
 Tracker`) measures it: on the first frame after a start or `reset` with both stripes, the
-median FWHM of the column (row) profiles (`stripe_widths`, every 4th profile, ≈ 3 ms at
-640×480), and σ = FWHM / 2.355 (the profile's std) on a 0.5 px grid (`choose_sigma`), at
+median FWHM of the column (row) profiles (`stripe_widths`, every 4th profile; 8.5 ms
+at 640×480, load 1.5–5, once per start or reset), and σ = FWHM / 2.355 (the profile's
+std) on a 0.5 px grid (`choose_sigma`), at
 most 6 px × min(H, W)/480 (the robust extractor's ceiling), once s exceeds the configured σ
 by 1.8 px or more (`SWITCH`; 2 px at 640×480, `cslx.runtime.pipeline.PipelineConfig.sigma`);
 narrower stripes keep the configured σ. One σ for both stripes: the wider one's. Each σ is
