@@ -81,7 +81,9 @@ outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
 Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes,
 the stripes' width is measured and σ chosen for it (`cslx.runtime.stripe_width`: the rule
-and the rig audit); a σ other than the configured one is compiled once and kept.
+and the rig audit), and the colour weights checked (`auto_weights`,
+`cslx.runtime.stripe_colour`: a green or blue laser is dark in R − G); each (σ, weights)
+other than the configured one is compiled once and kept (`sigma`, `weights`).
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -103,6 +105,7 @@ from ..config import MOTION
 from .junction_track import JunctionTrack
 from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
 from .step_program import step_program
+from .stripe_colour import choose_weights
 from .stripe_width import choose_sigma, stripe_widths, with_frame_sigma
 from .weld import heading_from_vertical
 
@@ -260,6 +263,7 @@ class Tracker:
         fps: float = MOTION.fps,
         roi: bool = True,
         auto_sigma: bool = True,
+        auto_weights: bool = True,
         log: logging.Logger | Callable[[str], None] | None = None,
     ):
         import jax
@@ -280,15 +284,17 @@ class Tracker:
         width, height = self.sensor.camera.image_size
         self.image_shape = (int(height), int(width), 3)
         self.x_ref = float(np.asarray(self._stripe_x(), float))
-        self._roi, self.auto_sigma, self.stripe_width_px = roi, bool(auto_sigma), (NAN, NAN)
-        self._programs: dict[float, Any] = {}  # the compiled step per Steger σ (px)
-        self.sigma = self.sigma0 = self._program(None)
+        self._roi, self.stripe_width_px = roi, (NAN, NAN)
+        self.auto_sigma, self.auto_weights = bool(auto_sigma), bool(auto_weights)
+        self._programs: dict[tuple, Any] = {}  # the compiled step per (Steger σ, weights)
+        self.sigma0, self.weights0 = self._program(None)
         self.compile_s = self._compile_s
         self.reset()
 
-    def _program(self, sigma: float | None) -> float:
-        """Compile (or reload) the step with Steger's σ = `sigma` px (None: the configured
-        σ); once per σ and tracker (`cslx.runtime.step_program`). Returns its σ."""
+    def _program(self, sigma: float | None, weights=None) -> tuple:
+        """Compile (or reload) the step with Steger's σ = `sigma` px and colour `weights`
+        (None: the configured ones); once per (σ, weights) and tracker
+        (`cslx.runtime.step_program`). Returns its (σ, weights)."""
         import jax
 
         height, width = self.image_shape[:2]
@@ -297,6 +303,7 @@ class Tracker:
             setting = "tracking_config()" if self._config is None else repr(self._config)
         else:
             config = with_frame_sigma(self.config, sigma, height, width)
+            config = dataclasses.replace(config, weights=tuple(weights or config.weights))
             setting = repr(config)
         t0 = time.perf_counter()
         compiled, args, meta = step_program(
@@ -304,29 +311,35 @@ class Tracker:
         )
         self._compile_s = time.perf_counter() - t0
         self._state0 = tuple(args[1:])  # the same state for every σ
-        self._fields, self._weights = tuple(meta["fields"]), tuple(meta["weights"])
-        self._programs[meta["sigma"]] = compiled
+        self._fields, key = tuple(meta["fields"]), (meta["sigma"], tuple(meta["weights"]))
+        self._programs[key] = compiled
         cache = jax.config.jax_compilation_cache_dir
         self._log(
-            f"tracker: compiled the {width}×{height} pipeline (Steger σ {meta['sigma']:g} px) "
+            f"tracker: compiled the {width}×{height} pipeline (Steger σ {key[0]:g} px, "
+            f"weights {key[1]}) "
             f"in {self._compile_s:.2f} s"
             + (f" (persistent cache {cache})" if cache else " (no persistent compile cache)")
         )
-        return meta["sigma"]
+        return key
 
     def _choose_sigma(self, frame: np.ndarray) -> None:
-        """Steger's σ from the stripes' width on the first frame with both (`stripe_width`)."""
-        widths = stripe_widths(frame, self._weights)
+        """Colour weights (`stripe_colour`), σ (`stripe_width`) on a frame with both stripes."""
+        w0 = self.weights0
+        weights, why = choose_weights(frame, w0) if self.auto_weights else (w0, "")
+        widths = stripe_widths(frame, weights)
         if not all(math.isfinite(w) for w in widths):
             return  # no stripe to measure: the next frame tries again
-        self._sigma_pending = False
-        self.stripe_width_px = widths
-        sigma = choose_sigma(max(widths), self.sigma0, min(self.image_shape[:2]))
+        self._sigma_pending, self.stripe_width_px = False, widths
+        size = min(self.image_shape[:2])
+        sigma = choose_sigma(max(widths) if self.auto_sigma else NAN, self.sigma0, size)
+        if weights != self.weights:
+            self._log(f"tracker: colour weights {weights}: {why}")
         if sigma != self.sigma:
             self._log(f"tracker: stripes {widths[0]:.1f} / {widths[1]:.1f} px wide: σ {sigma:g} px")
-            if sigma not in self._programs:
-                self._program(sigma)
-            self._compiled, self.sigma = self._programs[sigma], sigma
+        if (sigma, weights) not in self._programs:
+            self._program(sigma, weights)
+        self._compiled = self._programs[sigma, weights]
+        self.sigma, self.weights = sigma, weights
 
     @property
     def config(self):
@@ -387,8 +400,9 @@ class Tracker:
         self._odd_widths = 0
         self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
         self._restarts = 0
-        self._sigma_pending = self.auto_sigma  # σ is measured again after a reset
-        self.sigma, self._compiled = self.sigma0, self._programs[self.sigma0]
+        self._sigma_pending = self.auto_sigma or self.auto_weights  # again after a reset
+        self.sigma, self.weights = self.sigma0, self.weights0
+        self._compiled = self._programs[self.sigma0, self.weights0]
 
     def _carry_history(self, d: float, delta: float) -> None:
         if not len(self._hist):
