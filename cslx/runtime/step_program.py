@@ -1,8 +1,9 @@
 """The tracker's compiled step: the pipeline on one frame, its summary and the new state.
 
-`cslx.runtime.tracker.Tracker` runs it every frame; one program per Steger σ
-(`cslx.runtime.stripe_width`). Built by `cslx.runtime.compiled.cached_program`, so a cached
-start-up neither imports the pipeline nor traces it.
+`cslx.runtime.tracker.Tracker` runs it every frame; one program per (Steger σ, colour
+weights) (`cslx.runtime.stripe_width`, `cslx.runtime.stripe_colour`). Built by
+`cslx.runtime.compiled.cached_program`, so a cached start-up neither imports the pipeline
+nor traces it.
 """
 
 from __future__ import annotations

@@ -46,7 +46,8 @@ over frames (range)), before (σ 2) → after (this rule), horizontal / vertical
 - thin laser (sheet 0.25 mm, lens blur 0.4 px; FWHM 1–2 px): σ 2 kept, identical (2.7 /
   0.2 gross, 0.040 / 0.042 mm);
 - green laser: the tracker's R − G space sees it dark (60.8 / 39.2 gross at any σ): a
-  colour-space matter, not σ's.
+  colour-space matter, not σ's
+  (`cslx.runtime.stripe_colour` chooses the weights).
 
 Held out (seeds 8810–8813, not used to choose the rule): default rig identical (FWHM up to
 7.2 px); 1.6× lens 14.2 (0–32) / 5.8 (0–11) → 0.5 (0–2) / 0.8 (0–3), median 0.129 / 0.150

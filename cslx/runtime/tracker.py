@@ -353,7 +353,7 @@ class Tracker:
     def from_calibration(cls, path_or_sensor, config=None, log=None, **kwargs) -> Tracker:
         """A tracker for a calibration JSON file (docs/contracts.md) or a `Sensor`.
 
-        Keyword arguments go to `Tracker` (kalman, gates, speed_mm_s, fps, roi).
+        Keyword arguments go to `Tracker` (kalman, gates, speed_mm_s, fps, roi, auto_*).
         Raises `cslx.sensor.CalibrationError` for a bad file.
         """
         from ..sensor import Sensor, load_sensor
