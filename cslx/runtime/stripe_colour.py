@@ -21,9 +21,10 @@ together with Steger's σ (`cslx.runtime.stripe_width`):
 
 Evidence (`experiments/rig_colour.py`: rendered T scenes on the default rig, clean / sunny
 by seed parity, a cold and a tracking frame each, the tracker's pipeline with the tracker's
-(σ, weights) after its first frame; gross = centres > 1 mm from the truth in 3-D per stripe
-and frame, mean (range); median error, median over frames (range); horizontal / vertical
-stripe; load 7–8 on 2 cores), before (R − G) → after (this rule), dev seeds 8800–8805:
+(σ, weights) after its first frame, σ 2 throughout; gross = centres > 1 mm from the truth
+in 3-D per stripe and frame, mean (range); median error, median over frames (range);
+horizontal / vertical stripe; load 7–8 on 2 cores), before (R − G) → after (this rule),
+dev seeds 8800–8805:
 
 - red laser: R − G kept on every frame, identical (gross 4.4 (0–14) / 2.5 (0–6), median
   0.115 / 0.134 mm). R − G's kurtosis is ≥ 0.90 × the searched space's (2R − G − B or
@@ -41,7 +42,14 @@ stripe; load 7–8 on 2 cores), before (R − G) → after (this rule), dev seed
   0.136 mm.
 
 `KEEP` = 0.5 lies between the red frames' ratios (≥ 0.90) and the blue ones' (≤ 0.015).
-HOLDOUT
+Held out (seeds 8810–8813, not used to set the rule; load 2–5): red R − G kept, identical
+(4.5 (0–11) / 1.6 (0–5) gross, 0.112 / 0.146 mm); green −R + 2G − B on every frame (R − G
+skewness −4.5 to −10.6), gross 53.2 (32–81) / 44.2 (9–89) → 4.1 (0–12) / 2.9 (0–8),
+median 41.9 / 1.54 → 0.113 / 0.143 mm; blue −R − G + 2B on every frame (R − G kurtosis
+ratio ≤ 0.017 sunny), gross 44.5 (30–57) / 66.0 (16–143) → 3.0 (0–10) / 2.5 (0–7), median
+66.4 / 55.4 → 0.111 / 0.147 mm. The audit ran with the dark test at skewness < 0; the
+final `DARK` = −1 and `MIN_KURTOSIS` choose the same weights on all 60 first frames (3
+lasers × 20 seeds: the blue sunny ones, skewness ≈ 0, switch on the kurtosis test).
 
 The search costs 60–150 ms per frame at 640×480 (NumPy, load 7–8), once per start or
 reset; a new (σ, weights) program compiles in ≈ 15–20 s cold under that load (once per
