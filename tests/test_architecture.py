@@ -175,28 +175,24 @@ def test_runtime_import_skips_heavy_modules():
     never needed by the runtime.
     """
     heavy = ["matplotlib", "scipy", "cv2", "pandas", "tqdm", "optimistix", "lineax", "cslx.sim"]
-    code = (
-        "import sys; import cslx.runtime, cslx.runtime.tracker, cslx.runtime.pipeline; "
-        f"print(','.join(m for m in {heavy!r} if m in sys.modules))"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True, text=True
-    )
-    assert out.stdout.strip() == ""
+    imports = "cslx.runtime, cslx.runtime.tracker, cslx.runtime.pipeline"
+    assert _loaded_after(imports, heavy) == []
 
 
 def test_tracker_import_leaves_the_pipeline_unloaded():
     """A cached tracker start needs neither the pipeline nor MED/Steger (cslx.runtime.compiled):
     importing the tracker and the sensor must not load them (issue 13, start-up)."""
     lazy = ["cslx.runtime.pipeline", "cslx.segmentation.med", "cslx.runtime.controller"]
-    code = (
-        "import sys; import cslx.runtime.tracker, cslx.sensor; "
-        f"print(','.join(m for m in {lazy!r} if m in sys.modules))"
-    )
+    assert _loaded_after("cslx.runtime.tracker, cslx.sensor", lazy) == []
+
+
+def _loaded_after(imports: str, modules: list[str]) -> list[str]:
+    """Those of ``modules`` that a fresh interpreter has loaded after ``import {imports}``."""
+    code = f"import sys; import {imports}; print(*(m for m in {modules!r} if m in sys.modules))"
     out = subprocess.run(
         [sys.executable, "-c", code], check=True, cwd=ROOT, capture_output=True, text=True
     )
-    assert out.stdout.strip() == ""
+    return out.stdout.split()
 
 
 def test_cited_documents_exist():

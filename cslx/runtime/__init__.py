@@ -13,8 +13,7 @@ Nothing here imports the simulation (`cslx.sim`): a robot without a renderer run
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
+from ..lazy import lazy_attributes
 
 #: Public name → the submodule that defines it, imported on first use (`__getattr__`):
 #: importing the package loads no submodule, so the robot's start-up imports only what it
@@ -102,17 +101,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    if name in _OWNER:
-        owner = _OWNER[name]
-        module = importlib.import_module(f"{__name__}.{owner or name}")
-        value = module if owner is None else getattr(module, name)
-        globals()[name] = value
-        return value
-    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        return importlib.import_module(f"{__name__}.{name}")  # a submodule, as `pkg.pipeline`
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted({*globals(), *_OWNER})
+__getattr__, __dir__ = lazy_attributes(__name__, globals(), _OWNER)
