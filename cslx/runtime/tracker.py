@@ -322,14 +322,14 @@ class Tracker:
         )
         return key
 
-    def _choose_sigma(self, frame: np.ndarray) -> None:
-        """Colour weights (`stripe_colour`), σ (`stripe_width`) on a frame with both stripes."""
+    def _choose_program(self, frame: np.ndarray) -> None:
+        """This rig's step program: colour weights (`stripe_colour`), then σ (`stripe_width`)."""
         w0 = self.weights0
         weights, why = choose_weights(frame, w0) if self.auto_weights else (w0, "")
         widths = stripe_widths(frame, weights)
         if not all(math.isfinite(w) for w in widths):
             return  # no stripe to measure: the next frame tries again
-        self._sigma_pending, self.stripe_width_px = False, widths
+        self._check_pending, self.stripe_width_px = False, widths
         size = min(self.image_shape[:2])
         sigma = choose_sigma(max(widths) if self.auto_sigma else NAN, self.sigma0, size)
         if weights != self.weights:
@@ -400,7 +400,7 @@ class Tracker:
         self._odd_widths = 0
         self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
         self._restarts = 0
-        self._sigma_pending = self.auto_sigma or self.auto_weights  # again after a reset
+        self._check_pending = self.auto_sigma or self.auto_weights  # again after a reset
         self.sigma, self.weights = self.sigma0, self.weights0
         self._compiled = self._programs[self.sigma0, self.weights0]
 
@@ -522,8 +522,8 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        if self._sigma_pending:
-            self._choose_sigma(frame)
+        if self._check_pending:
+            self._choose_program(frame)
         summary, points_h, points_v, *state = self._compiled(frame, *self._state)
         self._state = tuple(state)
         raw = dict(zip(self._fields, np.asarray(summary, float).tolist(), strict=True))
