@@ -11,14 +11,39 @@ texts from it without paying for JAX at start-up.
   20 fps).
 - `Rig`: the default rig's geometry that other settings depend on (the look-ahead of the
   horizontal stripe in front of the robot's reference point).
+- Values the offline detector (`cslx.segmentation`) and the tracker's first-frame checks
+  (`cslx.runtime.stripe_colour`, `cslx.runtime.stripe_width`) share: the colour-space grid,
+  the clipped level, the search stride and the σ ceiling.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import enum
+import itertools
 
-__all__ = ["MOTION", "RIG", "Motion", "Rig", "Stripe"]
+__all__ = [
+    "CLIP_LEVEL",
+    "COLOUR_GRID",
+    "MOTION",
+    "RIG",
+    "SEARCH_STRIDE",
+    "SIGMA_MAX",
+    "Motion",
+    "Rig",
+    "Stripe",
+]
+
+#: The paper's grid of monochromatic spaces (section 3.1, correction 8): weights (w_r, w_g,
+#: w_b) of eq. (8) with w_r ∈ {0, 1, 2}, w_g, w_b ∈ {−2 … 2}, not all zero: 74 spaces.
+COLOUR_GRID = tuple(w for w in itertools.product(range(3), range(-2, 3), range(-2, 3)) if any(w))
+#: 8-bit value at and above which a channel is treated as clipped.
+CLIP_LEVEL = 254.0
+#: The kurtosis search scores every SEARCH_STRIDE-th column (row) of the frame.
+SEARCH_STRIDE = 8
+#: Steger σ ceiling (px) up to 480 px frames; above, ×min(H, W)/480 (the stripe's width in
+#: px grows with magnification; evidence at `cslx.segmentation.robust.SIGMA_MAX`).
+SIGMA_MAX = 6.0
 
 
 class Stripe(enum.Enum):

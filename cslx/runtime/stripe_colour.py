@@ -62,22 +62,15 @@ the check off (``Tracker(auto_weights=False)``).
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
+
+from ..config import CLIP_LEVEL, COLOUR_GRID, SEARCH_STRIDE
 
 __all__ = ["CANDIDATES", "DARK", "KEEP", "MIN_KURTOSIS", "choose_weights", "search", "space_scores"]
 
-#: The paper's grid (section 3.1): w_r ∈ {0, 1, 2}, w_g, w_b ∈ {−2..2}, not all zero; the
-#: same 74 spaces as `cslx.segmentation.colour.CANDIDATES` (not imported: it pulls in JAX
-#: modules a cached tracker start-up does not load).
-CANDIDATES = np.array(
-    [w for w in itertools.product(range(3), range(-2, 3), range(-2, 3)) if any(w)], np.float32
-)
-#: Sensor level from which a pixel counts as clipped (`cslx.segmentation.robust.CLIP_LEVEL`).
-CLIP_LEVEL = 254.0
-#: Every STRIDE-th column (row) is scored (`cslx.segmentation.robust.SEARCH_STRIDE`).
-STRIDE = 8
+#: The paper's 74 spaces (`cslx.config.COLOUR_GRID`, as `cslx.segmentation.colour.CANDIDATES`;
+#: that module is not imported: it pulls in JAX modules a cached tracker start-up does not load).
+CANDIDATES = np.array(COLOUR_GRID, np.float32)
 #: The configured weights are kept while their kurtosis is at least this share of the
 #: searched space's (module docstring).
 KEEP = 0.5
@@ -90,10 +83,10 @@ MIN_KURTOSIS = 10.0
 
 
 def _segments(rgb: np.ndarray, axis: int) -> np.ndarray:
-    """(M, N, 3) float: every STRIDE-th column (axis 0) or row (axis 1), clipped pixels set to
-    the frame's median colour."""
+    """(M, N, 3) float: every SEARCH_STRIDE-th column (axis 0) or row (axis 1), clipped
+    pixels set to the frame's median colour."""
     x = np.asarray(rgb)
-    x = x[:, ::STRIDE] if axis == 0 else x[::STRIDE].transpose(1, 0, 2)
+    x = x[:, ::SEARCH_STRIDE] if axis == 0 else x[::SEARCH_STRIDE].transpose(1, 0, 2)
     x = x.astype(np.float32)
     median = np.median(np.asarray(rgb)[::7, ::7].reshape(-1, 3), axis=0).astype(np.float32)
     return np.where(np.any(x >= CLIP_LEVEL, -1, keepdims=True), median, x)

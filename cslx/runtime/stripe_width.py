@@ -70,6 +70,8 @@ import math
 
 import numpy as np
 
+from ..config import SIGMA_MAX
+
 __all__ = [
     "choose_sigma",
     "frame_sigma",
@@ -88,8 +90,6 @@ STEP = 0.5
 #: σ follows the stripe only when its profile std exceeds `floor` (the configured σ) by at
 #: least this much, px: below, the tracker's evidence on the default rig was mixed (docstring).
 SWITCH = 1.8
-#: Largest σ, px (`cslx.segmentation.robust.SIGMA_MAX`'s value).
-SIGMA_MAX = 6.0
 
 
 def profile_widths(

@@ -53,13 +53,14 @@ the dtype follows the inputs (uint8 frames become the default float dtype).
 from __future__ import annotations
 
 import functools
-import itertools
 from typing import Literal
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
+
+from ..config import COLOUR_GRID
 
 __all__ = [
     "CANDIDATES",
@@ -77,10 +78,7 @@ Form = Literal["normalized", "paper"]
 DEFAULT_FORM: Form = "normalized"
 
 # The paper's grid (section 3.1, correction 8): w_r ∈ {0,1,2}, w_g, w_b ∈ {−2..2}, ≠ 0.
-CANDIDATES: np.ndarray = np.array(
-    [w for w in itertools.product(range(0, 3), range(-2, 3), range(-2, 3)) if any(w)],
-    dtype=np.int32,
-)
+CANDIDATES: np.ndarray = np.array(COLOUR_GRID, dtype=np.int32)
 assert CANDIDATES.shape == (74, 3)
 
 NAMED_SPACES: dict[str, tuple[float, float, float]] = {

@@ -134,6 +134,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from ..config import CLIP_LEVEL, SEARCH_STRIDE, SIGMA_MAX
 from .path import smooth_path
 from .refine import second_pass
 from .ridges import (
@@ -160,12 +161,8 @@ __all__ = [
     "stripe_sigma",
 ]
 
-#: 8-bit value at and above which a channel is treated as clipped.
-CLIP_LEVEL = 254.0
 #: Longest clipped run (px along the search axis) treated as a saturated laser core.
 MAX_RUN = 24
-#: The kurtosis search scores every SEARCH_STRIDE-th column (row) of the frame.
-SEARCH_STRIDE = 8
 #: Floor, slope and ceiling of the width-aware σ. Steger's condition is σ ≥ s (Gaussian
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
 #: 2.5 / 3.5 / 4.5 px gave median errors 0.090 / 0.084 / 0.073 mm at the same detection and
@@ -179,7 +176,7 @@ SIGMA_ALONG = 6.0
 #: σ ceiling (px) up to 480 px frames; above, ×min(H, W)/480 (the stripe's width in px grows
 #: with magnification). Rig audit (1280×720, 2× focal length, 4 mm sheet, s ≈ 9.5 px, dev
 #: seeds 8800–8801): σ 6 / 9 / 12 gave H gross 54 / 5 / 5 and V 55 / 20 / 21 centres.
-SIGMA_MAX = 6.0
+#: (`cslx.config.SIGMA_MAX`, shared with the tracker's `cslx.runtime.stripe_width`.)
 #: Frame height (px) up to which `SIGMA_MAX` applies unscaled.
 SIGMA_MAX_HEIGHT = 480
 #: Smooth the linked path with adaptive local quadratics (`cslx.segmentation.path`).
