@@ -79,11 +79,11 @@ still sees the followed weld), is ignored; sightings where the two stripes cross
 `junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
 outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
-Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes,
-the stripes' width is measured and σ chosen for it (`cslx.runtime.stripe_width`: the rule
-and the rig audit), and the colour weights checked (`auto_weights`,
-`cslx.runtime.stripe_colour`: a green or blue laser is dark in R − G); each (σ, weights)
-other than the configured one is compiled once and kept (`sigma`, `weights`).
+Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes
+(checked on the first 8 frames, then every 16th: `check_due`), the stripes' width is measured
+and σ chosen for it (`cslx.runtime.stripe_width`: the rule and the rig audit), the colour
+weights checked (`auto_weights`, `cslx.runtime.stripe_colour`: a green or blue laser is dark
+in R − G); each (σ, weights) other than the configured one is compiled once and kept.
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -106,7 +106,7 @@ from .junction_track import JunctionTrack
 from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
 from .step_program import step_program
 from .stripe_colour import choose_weights
-from .stripe_width import choose_sigma, stripe_widths, with_frame_sigma
+from .stripe_width import check_due, choose_sigma, stripe_widths, with_frame_sigma
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -522,7 +522,7 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        if self._check_pending:
+        if self._check_pending and check_due(obs.frame):
             self._choose_program(frame)
         summary, points_h, points_v, *state = self._compiled(frame, *self._state)
         self._state = tuple(state)
