@@ -33,7 +33,12 @@ dataclasses registered as pytrees): importing the tracker and the sensor 0.46 �
 wall at load 7–8 (6 pairs). All three in one run at load 8–9 (5 rounds; wall is ≈ 2.5×
 CPU at that load, so CPU s is the figure to compare): process CPU 1.95 s (exported
 program) → 1.79 s (serialised executable) → 1.46 s (and no equinox), wall 4.6 → 4.3 →
-3.7 s. What is left (CPU, quiet machine): importing NumPy and JAX ≈ 0.45 s, cslx's modules
+3.7 s. Then jaxtyping (annotations only, now imported for type checkers alone): importing
+the tracker and the sensor 0.09 → 0.05 s wall, process CPU 1.22 → 1.14 s (load 8, 6
+pairs). `bench_speed`'s own start-up worker, before (exported program, equinox) against
+after (serialised executable, no equinox), 6 interleaved pairs at load 7: process start →
+first frame 2.09 → 1.65 s (CPU 1.99 → 1.63 s); the garbage collector off during start-up
+(as ``cslx track`` has it) saves ≈ 0.05 s CPU more. What is left (CPU, quiet machine): importing NumPy and JAX ≈ 0.45 s, cslx's modules
 ≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the first frame (the σ /
 colour check and the program) ≈ 0.05 s.
 
