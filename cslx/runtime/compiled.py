@@ -23,21 +23,38 @@ folder it is plain ``jax.jit(fn).lower(*args).compile()``. Like JAX's own cache,
 is trusted: deserialising it loads machine code (keep the folder private).
 
 Where a cached start-up goes (the tracker, 640×480, `bench_speed`'s start-up probe with a
-breakdown, fresh processes on the 2-core machine, wall seconds, medians of 6 interleaved
-pairs at load 3–4): importing JAX 0.40–0.46 s; importing the tracker and the sensor
-(equinox ≈ 0.14 s CPU of it) 0.18–0.20 s; building the default sensor 0.06 s; loading
-the program 0.84 s before → 0.52 s now; the first frame 0.05 s; process start → first
-frame 1.60 s → 1.42 s. Before, a cached start deserialised a `jax.export.Exported` (the
-StableHLO), lowered the wrapper calling it (0.34 s, 0.21 s of it importing SciPy: the
-lowering of an exported call sets up JAX's LAPACK kernels, which load SciPy, although this
-program calls no LAPACK) and then read the executable from JAX's persistent cache; now the
-whole load is XLA's deserialisation of the executable, which scales with the program's
-≈ 17 000 optimised HLO instructions (weld features 37 %, three Steger copies 31 % of
-those with a source location). Tried and not adopted: stripping the locations (HLO
-metadata, 3.7 → 2.9 MB) loaded ≈ 10 % faster in 4 pairs at load 10, within the scatter,
-and needs JAX internals; fewer traceback frames in the locations
-(``jax_include_full_tracebacks_in_locations``: 3.7 → 3.2 MB) no change;
-``--xla_cpu_parallel_codegen_split_count=1`` (executable load 1.04–1.40 s against
+breakdown, fresh processes on the 2-core machine, medians of interleaved runs). At load 3–4
+(6 pairs, wall s): importing JAX 0.40–0.46 s; importing the tracker and the sensor 0.18–0.20
+s (equinox ≈ 0.14 s CPU of it); building the default sensor 0.06 s; loading the program 0.84
+s with the exported program → 0.52 s with the serialised executable; the first frame 0.05 s;
+process start → first frame 1.60 → 1.42 s. Then equinox left the path (`cslx.pytree`: the
+sensor, its camera and the weld detector's settings are frozen dataclasses registered as
+pytrees): importing the tracker and the sensor 0.46 → 0.13 s wall at load 7–8 (6 pairs). All
+three in one run at load 8–9 (5 rounds; wall is ≈ 2.5× CPU at that load, so CPU s is the
+figure to compare): process CPU 1.95 s (exported program) → 1.79 s (serialised executable) →
+1.46 s (and no equinox), wall 4.6 → 4.3 → 3.7 s. Then jaxtyping (annotations only, now
+imported for type checkers alone): importing the tracker and the sensor 0.09 → 0.05 s wall,
+process CPU 1.22 → 1.14 s (load 8, 6 pairs). `bench_speed`'s own start-up worker, before
+(exported program, equinox) against after (serialised executable, no equinox), 6 interleaved
+pairs at load 7 (the first after-run compiled: 5 counted): process start → first frame 2.09
+→ 1.65 s (CPU 1.99 → 1.63 s); the garbage collector off during start-up (as ``cslx track``
+has it) saves ≈ 0.05 s CPU more. What is left (CPU, quiet machine): importing NumPy and JAX
+≈ 0.45 s, cslx's modules ≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the
+first frame (the σ / colour check and the program) ≈ 0.05 s.
+
+Before, a cached start deserialised a `jax.export.Exported` (the StableHLO), lowered the
+wrapper calling it (0.34 s, 0.21 s of it importing SciPy: the lowering of an exported call
+sets up JAX's LAPACK kernels, which load SciPy, although this program calls no LAPACK) and
+then read the executable from JAX's persistent cache; now the whole load is XLA's
+deserialisation of the executable (a 3.7 MB file), which scales with the program's
+≈ 17 000 optimised HLO instructions in 1 300 computations (of those with a source
+location, the weld features 37 %, three Steger copies, one per `lax.cond` branch of the
+pipeline, 31 %): rebuilding the HLO module from its proto is ≈ 45 % of it, buffer
+assignment, alias analysis, the thunks and linking the machine code most of the rest. Tried
+and not adopted: stripping the locations (HLO metadata, 3.7 → 2.9 MB) loaded ≈ 10 %
+faster in 4 pairs at load 10, within the scatter, and needs JAX internals; fewer traceback
+frames in the locations (``jax_include_full_tracebacks_in_locations``: 3.7 → 3.2 MB) no
+change; ``--xla_cpu_parallel_codegen_split_count=1`` (executable load 1.04–1.40 s against
 1.30–1.54 s, three interleaved pairs at load 6–9: not decisive for a process-wide flag).
 """
 
