@@ -37,12 +37,6 @@ class KalmanConfig:
     reset_after: int = 3  # mutually consistent rejected measurements in a row → restart
     consistent_mm: float = 1.0  # half their spread (max − min) at x_ref, mm
     give_up_after: int = 8  # rejected measurements in a row that restart it regardless
-    # rejected centres are forgotten after this much travel (mm; 0: never), so that a
-    # restart ("in a row", its offset and heading) rests on recent centres, not on one
-    # rejected before the filter coasted through frames without a bead (Figure 22 at a
-    # T: the horizontal stripe along the crossing weld for ≈ 60 frames); 15 mm is 10
-    # frames at the nominal 1.5 mm per frame. The in-place turn at a T travels ≈ 0 mm
-    pending_window_mm: float = 15.0
     # a restart takes its heading from the rejected centres when they span this much and
     # contradict the current heading (`WeldLineFilter._restart_heading`); 0: keep the heading.
     # Figure 22's closed loop, sunny, dev seeds 2201 / 2203 / 2204 (`experiments/
@@ -134,7 +128,6 @@ class WeldLineFilter:
         self.rejected = 0
         self.restarts = 0
         self.pending: list[np.ndarray] = []  # rejected centres (x_r, y_r), current frame
-        self.pending_mm: list[float] = []  # how far the robot travelled since each
 
     @property
     def initialised(self) -> bool:
@@ -142,12 +135,6 @@ class WeldLineFilter:
 
     def predict(self, d: float, delta: float) -> None:
         self.pending = [np.array(carry(p[0], p[1], d, delta)) for p in self.pending]
-        self.pending_mm = [a + abs(d) for a in self.pending_mm]
-        if self.c.pending_window_mm > 0 and self.pending:
-            keep = [a <= self.c.pending_window_mm for a in self.pending_mm]
-            self.pending = [p for p, k in zip(self.pending, keep, strict=True) if k]
-            self.pending_mm = [a for a, k in zip(self.pending_mm, keep, strict=True) if k]
-            self.rejected = len(self.pending)
         if self.x is None:
             return
         c = self.c
@@ -164,7 +151,7 @@ class WeldLineFilter:
         self.x = np.array([y, theta])
         self.P = np.diag([c.init_offset_std**2, sd**2])
         self.rejected = 0
-        self.pending, self.pending_mm = [], []
+        self.pending = []
 
     def _reacquire(self) -> bool:
         """Restart at the rejected centres if the last `reset_after` agree (docstring)."""
@@ -253,14 +240,13 @@ class WeldLineFilter:
         if nu * nu > c.gate**2 * S:
             self.rejected += 1
             self.pending.append(np.array([x_c, y_c], float))
-            self.pending_mm.append(0.0)
             return self._reacquire()
         K = self.P @ H / S
         self.x = self.x + K * nu
         self.P = (np.eye(2) - np.outer(K, H)) @ self.P
         self.P = 0.5 * (self.P + self.P.T)
         self.rejected = 0
-        self.pending, self.pending_mm = [], []
+        self.pending = []
         return True
 
 

@@ -36,8 +36,6 @@ filter over s = (e, θ):
   lateral jump, or a wrong prediction that locked the truth out) the filter restarts at
   their mean, moved to x_ref with the current heading, with a broad covariance. A run of
   rejections that never agree (clutter) restarts it only after `give_up_after` frames.
-  Rejected centres are forgotten after `pending_window_mm` (15 mm) of travel: a restart
-  rests on recent centres, never on one rejected before the filter coasted.
   Where the rejected centres, carried by odometry, lie on a line whose direction
   contradicts the current heading (re-acquiring the crossing weld during the turn at a T,
   while the heading is still the old weld's, ≈ 90° off) the restart takes the line's

@@ -1,15 +1,13 @@
 """The robust heading line (cslx.runtime.line_filter.robust_line) and the temporal junction
-rule (cslx.runtime.junction_track.JunctionTrack) and the filter's rejected-centre window, on
-synthetic data with known answers."""
+rule (cslx.runtime.junction_track.JunctionTrack), on synthetic data with known answers."""
 
-import copy
 import math
 
 import numpy as np
 import pytest
 
 from cslx.runtime.junction_track import JunctionTrack
-from cslx.runtime.line_filter import KalmanConfig, WeldLineFilter, robust_line
+from cslx.runtime.line_filter import robust_line
 
 
 def test_robust_line_ignores_biased_centres():
@@ -146,36 +144,3 @@ def test_a_junction_first_seen_inside_the_zone_is_placed_by_those_sightings():
     bar = lambda k: 140.0 - 1.5 * k  # noqa: E731
     out = _run(JunctionTrack(10, 6.0, hold=6, crossing_zone=(120.0, 162.0)), [bar] * 4)
     assert out[3] == pytest.approx(bar(3), abs=0.01)
-
-
-def _settled_filter(seed: int = 9) -> WeldLineFilter:
-    rng = np.random.default_rng(seed)
-    kf = WeldLineFilter(KalmanConfig(), 150.0)
-    for _ in range(30):  # settled on a weld at y = 0, heading 0
-        kf.predict(1.5, 0.0)
-        kf.update(150.0, rng.normal(0, 0.1), 0.8)
-    return kf
-
-
-def test_restart_does_not_rest_on_a_centre_rejected_before_coasting():
-    """One centre 12 mm off is rejected, the robot coasts 40 mm without a bead (the stripe
-    along the crossing weld of a T), then two more 12 mm off are rejected: only two of the
-    three lie within `pending_window_mm`, so the filter keeps its state (without the window
-    the stale one made three "in a row" and the filter restarted on them). Three recent
-    ones still restart it, with the heading it had."""
-    kf = _settled_filter()
-    kf.predict(1.5, 0.0)
-    assert not kf.update(150.0, 12.0, 0.8)
-    for _ in range(27):  # 40.5 mm without a bead
-        kf.predict(1.5, 0.0)
-    coasting = copy.deepcopy(kf)  # the same filter without the two updates
-    for _ in range(2):
-        kf.predict(1.5, 0.0)
-        coasting.predict(1.5, 0.0)
-        assert not kf.update(150.0, 12.0, 0.8)
-    assert kf.restarts == 0 and len(kf.pending) == 2
-    np.testing.assert_array_equal(kf.x, coasting.x)
-    kf.predict(1.5, 0.0)
-    theta = kf.x[1]
-    assert kf.update(150.0, 12.0, 0.8) and kf.restarts == 1
-    assert abs(kf.x[0] - 12.0) < 0.1 and kf.x[1] == theta
