@@ -235,6 +235,32 @@ def _delay(W, st, pb, delay, ridge_sigma):
     return d, sign
 
 
+#: Step caps up to this are run as straight-line code (`_unrolled`), not a solver loop.
+UNROLL_STEPS = 3
+
+
+def _unrolled(step, y0, args, tol, max_steps):
+    """`optimistix.fixed_point` with `FixedPointIteration` for a small ``max_steps``, unrolled.
+
+    The same iterates, stopping rule and step count (a step whose kurtosis change is within
+    tolerance ends the iteration; later steps are computed and discarded), as straight-line
+    code: the tracking bands take 2 steps a frame, and the solver's while loop and its
+    bookkeeping cost more than the steps' own kernels there (issue 13: MED on the 64×640
+    band 2.1 → see `cslx.runtime.pipeline` for the measured numbers).
+    """
+    atol = tol * 1e-6
+    y, done = y0, jnp.zeros((), bool)
+    steps = jnp.zeros((), jnp.int32)
+    for _ in range(max_steps):
+        new = step(y, args)
+        # optimistix: error y − f(y) over atol + rtol·|f(y)|, on the kurtosis component
+        rel = _kurtosis_change(((), (y[1] - new[1]) / (atol + tol * jnp.abs(new[1]))))
+        y = jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), y, new)
+        steps = steps + jnp.where(done, 0, 1)
+        done = done | (rel < 1)
+    return y, steps, done
+
+
 @eqx.filter_jit
 def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma, symmetric=False):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
@@ -247,22 +273,30 @@ def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma
         W_new, st = _f.update(W, pb, loading, symmetric)
         return W_new, st.ratio_sum
 
-    import optimistix as optx  # lazy: a cached start-up never traces this (runtime.compiled)
-
-    solver = optx.FixedPointIteration(rtol=tol, atol=tol * 1e-6, norm=_kurtosis_change)
     y0 = (W0, jnp.zeros((), W0.dtype))
-    sol = optx.fixed_point(step, solver, y0, args=(pb, loading), max_steps=max_steps, throw=False)
-    W = sol.value[0]
+    if 0 < max_steps <= UNROLL_STEPS:
+        y, steps, converged = _unrolled(step, y0, (pb, loading), tol, max_steps)
+        W = y[0]
+    else:
+        import optimistix as optx  # lazy: a cached start-up never traces this (runtime.compiled)
+
+        solver = optx.FixedPointIteration(rtol=tol, atol=tol * 1e-6, norm=_kurtosis_change)
+        sol = optx.fixed_point(
+            step, solver, y0, args=(pb, loading), max_steps=max_steps, throw=False
+        )
+        W = sol.value[0]
+        steps, converged = sol.stats["num_steps"], sol.result == optx.RESULTS.successful
     st = _f.stats(W, pb)
     delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
     W = W * sign
     if delay_kind == "centre" and L % 2:
         out = _f.centre_output(st, sign, pb)  # a whole-sample delay: a slice, no FFT
+    elif delay_kind == "centre":
+        out = _f.shifted_output(W, (L - 1) / 2, pb)  # a static delay: a constant phase
     else:
         out = _f.shifted_output(W, delay, pb)
     out = out.T if axis == 0 else out
-    steps = sol.stats["num_steps"]
-    return MEDResult(out, W, delay, st.excess, steps, sol.result == optx.RESULTS.successful)
+    return MEDResult(out, W, delay, st.excess, steps, converged)
 
 
 def med(
