@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ..pytree import pytree_dataclass, static
 from .camera import Camera, pixel_to_ray
 
 __all__ = [
@@ -44,8 +44,12 @@ class CalibrationError(ValueError):
     """A calibration file or calibration input that cannot be used, with the reason."""
 
 
-class Sensor(eqx.Module):
+@pytree_dataclass(eq=False)
+class Sensor:
     """Camera, its laser planes (a cross: two; a line laser: one) and the camera-to-robot transform.
+
+    An immutable pytree like `cslx.sensor.camera.Camera` (a frozen dataclass, not an
+    `equinox.Module`: the tracker's start-up, issue 13).
 
     Attributes:
         camera: intrinsics and distortion.
@@ -62,7 +66,7 @@ class Sensor(eqx.Module):
     planes: Float[Array, "p 3"]
     R_cr: Float[Array, "3 3"]
     T_cr: Float[Array, 3]
-    stripes: tuple[str, ...] | None = eqx.field(static=True, default=None)
+    stripes: tuple[str, ...] | None = static(None)
 
     @property
     def plane_stripes(self) -> tuple[str, ...]:
