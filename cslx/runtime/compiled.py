@@ -23,19 +23,24 @@ folder it is plain ``jax.jit(fn).lower(*args).compile()``. Like JAX's own cache,
 is trusted: deserialising it loads machine code (keep the folder private).
 
 Where a cached start-up goes (the tracker, 640×480, `bench_speed`'s start-up probe with a
-breakdown, fresh processes on the 2-core machine, medians of interleaved runs). At load
-3–4 (6 pairs, wall s): importing JAX 0.40–0.46 s; importing the tracker and the sensor
-0.18–0.20 s (equinox ≈ 0.14 s CPU of it); building the default sensor 0.06 s; loading the
-program 0.84 s with the exported program → 0.52 s with the serialised executable; the
-first frame 0.05 s; process start → first frame 1.60 → 1.42 s. Then equinox left the
-path (`cslx.pytree`: the sensor, its camera and the weld detector's settings are frozen
-dataclasses registered as pytrees): importing the tracker and the sensor 0.46 → 0.13 s
-wall at load 7–8 (6 pairs). All three in one run at load 8–9 (5 rounds; wall is ≈ 2.5×
-CPU at that load, so CPU s is the figure to compare): process CPU 1.95 s (exported
-program) → 1.79 s (serialised executable) → 1.46 s (and no equinox), wall 4.6 → 4.3 →
-3.7 s. What is left (CPU, quiet machine): importing NumPy and JAX ≈ 0.45 s, cslx's modules
-≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the first frame (the σ /
-colour check and the program) ≈ 0.05 s.
+breakdown, fresh processes on the 2-core machine, medians of interleaved runs). At load 3–4
+(6 pairs, wall s): importing JAX 0.40–0.46 s; importing the tracker and the sensor 0.18–0.20
+s (equinox ≈ 0.14 s CPU of it); building the default sensor 0.06 s; loading the program 0.84
+s with the exported program → 0.52 s with the serialised executable; the first frame 0.05 s;
+process start → first frame 1.60 → 1.42 s. Then equinox left the path (`cslx.pytree`: the
+sensor, its camera and the weld detector's settings are frozen dataclasses registered as
+pytrees): importing the tracker and the sensor 0.46 → 0.13 s wall at load 7–8 (6 pairs). All
+three in one run at load 8–9 (5 rounds; wall is ≈ 2.5× CPU at that load, so CPU s is the
+figure to compare): process CPU 1.95 s (exported program) → 1.79 s (serialised executable) →
+1.46 s (and no equinox), wall 4.6 → 4.3 → 3.7 s. Then jaxtyping (annotations only, now
+imported for type checkers alone): importing the tracker and the sensor 0.09 → 0.05 s wall,
+process CPU 1.22 → 1.14 s (load 8, 6 pairs). `bench_speed`'s own start-up worker, before
+(exported program, equinox) against after (serialised executable, no equinox), 6 interleaved
+pairs at load 7 (the first after-run compiled: 5 counted): process start → first frame 2.09
+→ 1.65 s (CPU 1.99 → 1.63 s); the garbage collector off during start-up (as ``cslx track``
+has it) saves ≈ 0.05 s CPU more. What is left (CPU, quiet machine): importing NumPy and JAX
+≈ 0.45 s, cslx's modules ≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the
+first frame (the σ / colour check and the program) ≈ 0.05 s.
 
 Before, a cached start deserialised a `jax.export.Exported` (the StableHLO), lowered the
 wrapper calling it (0.34 s, 0.21 s of it importing SciPy: the lowering of an exported call

@@ -47,15 +47,16 @@ only |θ| is seen) or uninformative (bare plate).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..pytree import pytree_dataclass, static
 from .small_ops import masked_median, solve_spd
 
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, ArrayLike, Bool, Float
 __all__ = [
     "WeldConfig",
     "WeldFeature",
@@ -67,8 +68,7 @@ __all__ = [
     "heading_from_vertical",
 ]
 
-HORIZONTAL_AXIS = 1  # the horizontal stripe runs along y_r
-VERTICAL_AXIS = 0  # the vertical stripe runs along x_r
+HORIZONTAL_AXIS, VERTICAL_AXIS = 1, 0  # the stripes run along y_r and x_r
 
 
 @pytree_dataclass

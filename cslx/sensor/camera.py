@@ -18,12 +18,16 @@ jit-, vmap- and grad-friendly; the dtype follows the inputs.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
 
 from ..pytree import pytree_dataclass, static
+
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
     "Camera",

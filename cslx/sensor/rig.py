@@ -16,14 +16,17 @@ the cross (the tracker). The calibration file is `cslx.sensor.calibration_file`
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
 
 from ..pytree import pytree_dataclass, static
 from .camera import Camera, pixel_to_ray
+
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
     "CalibrationError",
