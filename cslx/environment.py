@@ -4,8 +4,9 @@
   calls LAPACK through SciPy's OpenBLAS. On a loaded 2-core machine OpenBLAS's threaded
   Cholesky of a 240–320 sized matrix was 100–1000× slower than single-threaded (one MED
   iteration took 175–760 ms instead of 0.5 ms), and XLA already runs its own threads.
-  `OPENBLAS_NUM_THREADS` works only before NumPy loads, so `configure` sets it and also
-  limits the already-loaded BLAS pools with threadpoolctl.
+  `OPENBLAS_NUM_THREADS` works only before NumPy loads, so `configure` sets it and, when
+  NumPy or SciPy is already loaded (or the variable was set to another value), also limits
+  the BLAS pools with threadpoolctl.
 - **Compile cache.** A persistent XLA compilation cache makes the second start of a
   command (the tracker's 12–20 s compile) take a fraction of a second.
 - **Quiet CPU start.** On a machine without accelerators JAX probes for a TPU backend and
@@ -18,6 +19,7 @@ first; a robot runtime that imports cslx decides for itself.
 from __future__ import annotations
 
 import os
+import sys
 
 __all__ = ["configure", "limit_blas_threads", "set_compile_cache"]
 
@@ -35,6 +37,10 @@ def limit_blas_threads(threads: int | str | None = None) -> None:
     if setting in ("off", "none", ""):
         return
     os.environ.setdefault("OPENBLAS_NUM_THREADS", setting)
+    if os.environ["OPENBLAS_NUM_THREADS"] == setting and not {"numpy", "scipy"} & set(sys.modules):
+        # No BLAS loaded yet: NumPy's and SciPy's OpenBLAS read the variable when they load.
+        # Importing SciPy here to limit it at once cost ≈ 0.2 s of every start-up (issue 13).
+        return
     try:
         import scipy.linalg  # noqa: F401  (load SciPy's OpenBLAS so that it is limited too)
         from threadpoolctl import threadpool_limits

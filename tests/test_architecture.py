@@ -180,9 +180,11 @@ def test_runtime_import_skips_heavy_modules():
 
 
 def test_tracker_import_leaves_the_pipeline_unloaded():
-    """A cached tracker start needs neither the pipeline nor MED/Steger (cslx.runtime.compiled):
-    importing the tracker and the sensor must not load them (issue 13, start-up)."""
+    """A cached tracker start needs neither the pipeline nor MED/Steger (cslx.runtime.compiled)
+    nor equinox (≈ 0.14 s; `cslx.pytree`) nor jaxtyping (annotations only): importing the
+    tracker and the sensor must not load them (issue 13, start-up)."""
     lazy = ["cslx.runtime.pipeline", "cslx.segmentation.med", "cslx.runtime.controller"]
+    lazy += ["equinox", "jaxtyping"]
     assert _loaded_after("cslx.runtime.tracker, cslx.sensor", lazy) == []
 
 

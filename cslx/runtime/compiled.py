@@ -1,35 +1,60 @@
-"""Start-up without re-tracing: a jitted program exported once (`jax.export`) and reloaded.
+"""Start-up without re-tracing or lowering: a compiled program serialised once and reloaded.
 
 JAX's persistent compilation cache (`cslx.environment.set_compile_cache`) spares a second
 start-up XLA's compile, but not tracing the Python pipeline (equinox, optimistix, the
 `lax` loops) and lowering it to StableHLO, which must happen before the cache can even be
-looked up. `cached_program` keeps, in one file of the cache folder, the serialised
-`jax.export.Exported` of a flat program (arrays in, a tuple of arrays out), its concrete
-example arguments and a little JSON; a later start reads that file, lowers the small wrapper
-that calls the program and finds the XLA executable in the persistent cache (issue 13,
-start-up goal), without calling the code that builds the program. The tracker
+looked up. `cached_program` keeps, in one file of the cache folder, the serialised XLA
+executable of a flat program (arrays in, a tuple of arrays out;
+`jax.experimental.serialize_executable`), its concrete example arguments and a little JSON;
+a later start reads that file and deserialises the executable (issue 13, start-up goal),
+without calling the code that builds the program and without lowering anything. The tracker
 (`cslx.runtime.tracker`) keeps its initial state and its summary's field names there, so a
 cached start neither imports the pipeline (and MED, Steger, the weld features) nor runs
 `init_state`. `compile_cached` is the same for a function of pytrees.
 
 The file name is a hash of the caller's key (what the program closes over: settings, sensor
-values, shapes), the source of the installed cslx package and the JAX version, so an edit
-of the code or an upgrade never reloads a stale program. Without a cache folder it is plain
-``jax.jit(fn).lower(*args).compile()``.
+values, shapes), the source of the installed cslx package, the JAX version, the platform
+and the host CPU (the executable is machine code for it), so an edit of the code, an
+upgrade or another machine sharing the folder never reloads a stale program. The file is
+written from a fresh compile with JAX's persistent cache switched off: an executable that
+XLA read back from that cache serialises without its machine code and fails when run
+("Function … not found"). A file that cannot be read is compiled again. Without a cache
+folder it is plain ``jax.jit(fn).lower(*args).compile()``. Like JAX's own cache, the file
+is trusted: deserialising it loads machine code (keep the folder private).
 
 Where a cached start-up goes (the tracker, 640×480, `bench_speed`'s start-up probe with a
-breakdown, fresh processes, CPU seconds on the 2-core machine at load 9–10, medians of 6):
-importing JAX 0.41 s; importing the tracker and the sensor (equinox ≈ 0.2 s of it) 0.33 s
-before, 0.24 s now (`cslx.runtime` and `cslx.segmentation` load their submodules on first
-use; the pipeline only on a cache miss); building the default sensor 0.09 → 0.01 s (NumPy and
-`jax.device_put` instead of 7 small eager XLA programs); loading the cached program ≈ 0.75 s,
-most of it XLA's deserialisation of the executable (its size: ≈ 17 000 optimised HLO
-instructions, a quarter of them the weld features); the first frame 0.03 s. Loading a
-serialised executable directly (`jax.experimental.serialize_executable`) instead of the
-exported program saved ≈ 0.1 s CPU of the ≈ 0.7 s, within the scatter at that load, and an
-executable read back from the persistent cache and serialised again failed to run ("Function
-… not found"): not adopted. Tried and not adopted earlier:
-``--xla_cpu_parallel_codegen_split_count=1`` (executable load 1.04–1.40 s against
+breakdown, fresh processes on the 2-core machine, medians of interleaved runs). At load 3–4
+(6 pairs, wall s): importing JAX 0.40–0.46 s; importing the tracker and the sensor 0.18–0.20
+s (equinox ≈ 0.14 s CPU of it); building the default sensor 0.06 s; loading the program 0.84
+s with the exported program → 0.52 s with the serialised executable; the first frame 0.05 s;
+process start → first frame 1.60 → 1.42 s. Then equinox left the path (`cslx.pytree`: the
+sensor, its camera and the weld detector's settings are frozen dataclasses registered as
+pytrees): importing the tracker and the sensor 0.46 → 0.13 s wall at load 7–8 (6 pairs). All
+three in one run at load 8–9 (5 rounds; wall is ≈ 2.5× CPU at that load, so CPU s is the
+figure to compare): process CPU 1.95 s (exported program) → 1.79 s (serialised executable) →
+1.46 s (and no equinox), wall 4.6 → 4.3 → 3.7 s. Then jaxtyping (annotations only, now
+imported for type checkers alone): importing the tracker and the sensor 0.09 → 0.05 s wall,
+process CPU 1.22 → 1.14 s (load 8, 6 pairs). `bench_speed`'s own start-up worker, before
+(exported program, equinox) against after (serialised executable, no equinox), 6 interleaved
+pairs at load 7 (the first after-run compiled: 5 counted): process start → first frame 2.09
+→ 1.65 s (CPU 1.99 → 1.63 s); the garbage collector off during start-up (as ``cslx track``
+has it) saves ≈ 0.05 s CPU more. What is left (CPU, quiet machine): importing NumPy and JAX
+≈ 0.45 s, cslx's modules ≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the
+first frame (the σ / colour check and the program) ≈ 0.05 s.
+
+Before, a cached start deserialised a `jax.export.Exported` (the StableHLO), lowered the
+wrapper calling it (0.34 s, 0.21 s of it importing SciPy: the lowering of an exported call
+sets up JAX's LAPACK kernels, which load SciPy, although this program calls no LAPACK) and
+then read the executable from JAX's persistent cache; now the whole load is XLA's
+deserialisation of the executable (a 3.7 MB file), which scales with the program's
+≈ 17 000 optimised HLO instructions in 1 300 computations (of those with a source
+location, the weld features 37 %, three Steger copies, one per `lax.cond` branch of the
+pipeline, 31 %): rebuilding the HLO module from its proto is ≈ 45 % of it, buffer
+assignment, alias analysis, the thunks and linking the machine code most of the rest. Tried
+and not adopted: stripping the locations (HLO metadata, 3.7 → 2.9 MB) loaded ≈ 10 %
+faster in 4 pairs at load 10, within the scatter, and needs JAX internals; fewer traceback
+frames in the locations (``jax_include_full_tracebacks_in_locations``: 3.7 → 3.2 MB) no
+change; ``--xla_cpu_parallel_codegen_split_count=1`` (executable load 1.04–1.40 s against
 1.30–1.54 s, three interleaved pairs at load 6–9: not decisive for a process-wide flag).
 """
 
@@ -122,7 +147,7 @@ def cached_program(key: str, build, directory: str | os.PathLike | None = None):
 
     Args:
         key: text naming everything the program and its example arguments depend on (the
-            source of cslx, the JAX version and the platform are added here).
+            source of cslx, the JAX version, the platform and the host CPU are added here).
         build: ``build() -> (fn, args, meta)``: ``fn`` takes the flat ``args`` (arrays, or
             `jax.ShapeDtypeStruct`s for inputs given only by shape) and returns a tuple of
             arrays; ``meta`` is a JSON-able dict. Called only when the program is not on disk
@@ -137,60 +162,116 @@ def cached_program(key: str, build, directory: str | os.PathLike | None = None):
         modules it imports.
     """
     import jax
-    import numpy as np
 
     directory = directory or jax.config.jax_compilation_cache_dir
-    try:
-        import flatbuffers  # noqa: F401  (jax.export's serialisation needs it)
-    except ImportError:
-        directory = None
     if not directory:
         fn, args, meta = build()
         return jax.jit(fn).lower(*args).compile(), tuple(args), meta
+    path = pathlib.Path(directory) / "cslx-export" / f"{_file_name(key)}.npz"
+    loaded = _load(path) if path.is_file() else None
+    if loaded is not None:
+        return loaded
+    fn, args, meta = build()
+    args = tuple(args)
+    compiled = _fresh_compile(fn, args)
+    _save(path, compiled, args, meta)
+    return compiled, args, meta
+
+
+def _file_name(key: str) -> str:
+    """The cache file's name: a hash of the key, cslx's source, JAX, the platform, the CPU."""
+    import jax
     import jaxlib
 
-    platform = jax.default_backend()
     ident = "|".join(
-        [key, source_digest(), jax.__version__, jaxlib.__version__, platform]
+        [key, source_digest(), jax.__version__, jaxlib.__version__, jax.default_backend(),
+         _host_cpu()]
     )  # fmt: skip
-    name = hashlib.sha256(ident.encode()).hexdigest()[:32]
-    path = pathlib.Path(directory) / "cslx-export" / f"{name}.npz"
-    loaded = _load(path) if path.is_file() else None
-    if loaded is None:
-        fn, args, meta = build()
-        exported = jax.export.export(jax.jit(fn))(*args)
-        concrete = {
-            f"arg{i}": np.asarray(a)
-            for i, a in enumerate(args)
-            if not isinstance(a, jax.ShapeDtypeStruct)
-        }
-        blob = np.frombuffer(bytes(exported.serialize()), np.uint8)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
-        np.savez(tmp, exported=blob, meta=np.asarray(json.dumps(meta)), **concrete)
-        os.replace(tmp, path)
-        args = tuple(args)
-    else:
-        exported, args, meta = loaded
-    specs = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in exported.in_avals]
-    return jax.jit(exported.call).lower(*specs).compile(), args, meta
+    return hashlib.sha256(ident.encode()).hexdigest()[:32]
+
+
+def _host_cpu() -> str:
+    """The host CPU's model and instruction-set flags (a serialised CPU executable is machine
+    code for them, so a cache folder shared with another machine must not hand it over)."""
+    import platform
+
+    found = {}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                name, _, value = line.partition(":")
+                name = name.strip()
+                if name in ("model name", "flags") and name not in found:
+                    found[name] = value.strip()
+                if len(found) == 2:
+                    break
+    except OSError:
+        pass
+    return f"{platform.machine()}|{found.get('model name', '')}|{found.get('flags', '')}"
+
+
+def _fresh_compile(fn, args):
+    """``jax.jit(fn).lower(*args).compile()`` with JAX's persistent cache switched off.
+
+    An executable that XLA read back from that cache serialises without its machine code (it
+    then fails with "Function … not found" when run), so the one written here is always
+    compiled anew. The cache is switched on again afterwards as it was.
+    """
+    import jax
+    from jax.experimental.compilation_cache import compilation_cache
+
+    enabled = jax.config.jax_enable_compilation_cache
+    compilation_cache.reset_cache()
+    jax.config.update("jax_enable_compilation_cache", False)
+    try:
+        return jax.jit(fn).lower(*args).compile()
+    finally:
+        jax.config.update("jax_enable_compilation_cache", enabled)
+        compilation_cache.reset_cache()
+
+
+def _save(path: pathlib.Path, compiled, args: tuple, meta: dict) -> None:
+    """Write the serialised executable, the concrete example arguments and the meta data."""
+    import jax
+    import numpy as np
+    from jax.experimental import serialize_executable
+
+    blob, _, _ = serialize_executable.serialize(compiled)
+    concrete = {
+        f"arg{i}": np.asarray(a)
+        for i, a in enumerate(args)
+        if not isinstance(a, jax.ShapeDtypeStruct)
+    }
+    specs = [[list(a.shape), np.dtype(a.dtype).str] for a in args]
+    n_out = len(jax.tree_util.tree_leaves(compiled.out_info))
+    info = dict(meta=meta, specs=specs, n_out=n_out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".tmp{os.getpid()}.npz")
+    np.savez(
+        tmp, executable=np.frombuffer(blob, np.uint8), info=np.asarray(json.dumps(info)), **concrete
+    )
+    os.replace(tmp, path)
 
 
 def _load(path: pathlib.Path):
-    """(exported, args, meta) from a `cached_program` file; None if it cannot be read."""
+    """(compiled, args, meta) from a `cached_program` file; None if it cannot be read."""
     import jax
     import numpy as np
+    from jax.experimental import serialize_executable
 
     try:
         with np.load(path) as z:
-            exported = jax.export.deserialize(bytearray(z["exported"].tobytes()))
-            meta = json.loads(str(z["meta"]))
-            args = tuple(
-                jax.device_put(z[f"arg{i}"])
-                if f"arg{i}" in z.files
-                else jax.ShapeDtypeStruct(a.shape, a.dtype)
-                for i, a in enumerate(exported.in_avals)
+            info = json.loads(str(z["info"]))
+            specs = [jax.ShapeDtypeStruct(tuple(s), np.dtype(d)) for s, d in info["specs"]]
+            in_tree = jax.tree_util.tree_structure(((0,) * len(specs), {}))
+            out_tree = jax.tree_util.tree_structure((0,) * info["n_out"])
+            compiled = serialize_executable.deserialize_and_load(
+                z["executable"].tobytes(), in_tree, out_tree
             )
-    except Exception:  # a truncated or foreign file: export again
+            args = tuple(
+                jax.device_put(z[f"arg{i}"]) if f"arg{i}" in z.files else spec
+                for i, spec in enumerate(specs)
+            )
+    except Exception:  # a truncated, foreign or outdated file: compile again
         return None
-    return exported, args, meta
+    return compiled, args, info["meta"]

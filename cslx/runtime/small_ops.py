@@ -10,9 +10,13 @@ kernels here they fuse into the loops (issue 13). Same values to float32 roundin
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax.numpy as jnp
 from jax import lax
-from jaxtyping import Array, Bool, Float
+
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, Bool, Float
 
 __all__ = ["masked_median", "solve_spd", "window_nanmedian"]
 

@@ -54,7 +54,8 @@ filter over s = (e, θ):
   glint hides is narrow or wide and off-centre), gives θ with its standard deviation, fused
   as a heading measurement each frame. A straight weld has no lag this way (odometry, not
   the filter's random walk, carries the past); the window is forgotten when the filter
-  restarts. Numbers in `KalmanConfig`.
+  restarts, and fused only on frames whose bead was accepted (`cslx.runtime.path_heading`
+  says why). Numbers in `KalmanConfig`.
 
 Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
 
@@ -79,11 +80,11 @@ still sees the followed weld), is ignored; sightings where the two stripes cross
 `junction_crossing_zone_mm` of x_ref) hold a junction but do not move one that sightings
 outside that zone place (`cslx.runtime.junction_track.JunctionTrack`).
 
-Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes,
-the stripes' width is measured and σ chosen for it (`cslx.runtime.stripe_width`: the rule
-and the rig audit), and the colour weights checked (`auto_weights`,
-`cslx.runtime.stripe_colour`: a green or blue laser is dark in R − G); each (σ, weights)
-other than the configured one is compiled once and kept (`sigma`, `weights`).
+Steger's σ (`auto_sigma`): on the first frame after a start or `reset` with both stripes
+(checked on the first 8 frames, then every 16th: `check_due`), the stripes' width is measured
+and σ chosen for it (`cslx.runtime.stripe_width`: the rule and the rig audit), the colour
+weights checked (`auto_weights`, `cslx.runtime.stripe_colour`: a green or blue laser is dark
+in R − G); each (σ, weights) other than the configured one is compiled once and kept.
 
 The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
 `cslx.runtime.line_filter`.
@@ -103,10 +104,11 @@ import numpy as np
 
 from ..config import MOTION
 from .junction_track import JunctionTrack
-from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
+from .line_filter import KalmanConfig, WeldLineFilter
+from .path_heading import PathHeading
 from .step_program import step_program
 from .stripe_colour import choose_weights
-from .stripe_width import choose_sigma, stripe_widths, with_frame_sigma
+from .stripe_width import check_due, choose_sigma, stripe_widths, with_frame_sigma
 from .weld import heading_from_vertical
 
 __all__ = ["FrameGates", "KalmanConfig", "Observation", "Tracker", "LOG_FIELDS", "tracking_config"]
@@ -398,44 +400,10 @@ class Tracker:
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
-        self._hist = np.zeros((0, 4))  # bead centres (x_r, y_r, weight), current robot frame
-        self._restarts = 0
+        self._path = PathHeading(self.kalman, self.x_ref)  # the recent accepted bead centres
         self._check_pending = self.auto_sigma or self.auto_weights  # again after a reset
         self.sigma, self.weights = self.sigma0, self.weights0
         self._compiled = self._programs[self.sigma0, self.weights0]
-
-    def _carry_history(self, d: float, delta: float) -> None:
-        if not len(self._hist):
-            return
-        x, y = carry(self._hist[:, 0], self._hist[:, 1], d, delta)
-        self._hist = np.stack([x, y, *self._hist[:, 2:].T], 1)
-        keep = self._hist[:, 0] >= self.x_ref - self.kalman.heading_window_mm
-        self._hist = self._hist[keep]
-
-    def _window_heading(self, raw: dict, accepted: bool, conf: float) -> None:
-        """Fuse the heading of a robust line through the recent bead centres (KalmanConfig)."""
-        c, kf = self.kalman, self.filter
-        if kf.restarts != self._restarts:  # a new weld or a re-acquisition: forget the old
-            self._restarts = kf.restarts
-            self._hist = np.zeros((0, 4))
-        if accepted:
-            row = np.array([[raw["h_x_mm"], raw["h_y_mm"], max(conf, 0.05), raw["h_width_mm"]]])
-            self._hist = np.concatenate([self._hist, row])
-        h = self._hist
-        raw["window_heading_deg"] = raw["window_heading_sd_deg"] = NAN
-        if c.heading_window_mm <= 0 or len(h) < 6 or np.ptp(h[:, 0]) < c.heading_min_span_mm:
-            return
-        w = h[:, 2]
-        if c.heading_width_tol > 0:
-            m = np.median(h[:, 3])
-            w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
-        _, th, sd = robust_line(
-            h[:, 0], h[:, 1], w, self.x_ref, c.heading_scale_floor_mm, c.heading_tukey_c
-        )
-        if not math.isfinite(th):
-            return
-        raw["window_heading_deg"], raw["window_heading_sd_deg"] = math.degrees(th), math.degrees(sd)
-        kf.update_heading(th, sd)
 
     def _width_factor(self, width: float) -> float:
         """Weight of a bead whose width departs from the recent accepted ones (docstring)."""
@@ -491,7 +459,7 @@ class Tracker:
         d, delta = self._motion(dt, odometry)
         if index > 0:
             self.filter.predict(d, delta)
-            self._carry_history(d, delta)
+            self._path.move(d, delta)
             self._junctions.move(d, delta)
         try:
             why = self._check(frame)
@@ -522,7 +490,7 @@ class Tracker:
         return None
 
     def _measure(self, frame: np.ndarray, obs: Observation, d: float) -> Observation:
-        if self._check_pending:
+        if self._check_pending and check_due(obs.frame):
             self._choose_program(frame)
         summary, points_h, points_v, *state = self._compiled(frame, *self._state)
         self._state = tuple(state)
@@ -548,7 +516,10 @@ class Tracker:
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
             if accepted:
                 self._widths.append(raw["h_width_mm"])
-            self._window_heading(raw, accepted, conf)
+            wh = self._path.update(
+                kf, raw["h_x_mm"], raw["h_y_mm"], conf, raw["h_width_mm"], accepted
+            )
+            raw["window_heading_deg"], raw["window_heading_sd_deg"] = wh
             obs.bead_width_mm, obs.bead_height_mm = raw["h_width_mm"], raw["h_height_mm"]
             if accepted and self.kalman.use_vertical_heading:
                 th, sd = heading_from_vertical(

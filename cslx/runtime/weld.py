@@ -47,15 +47,16 @@ only |θ| is seen) or uninformative (bare plate).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Bool, Float
 
+from ..pytree import pytree_dataclass, static
 from .small_ops import masked_median, solve_spd
 
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, ArrayLike, Bool, Float
 __all__ = [
     "WeldConfig",
     "WeldFeature",
@@ -67,12 +68,12 @@ __all__ = [
     "heading_from_vertical",
 ]
 
-HORIZONTAL_AXIS = 1  # the horizontal stripe runs along y_r
-VERTICAL_AXIS = 0  # the vertical stripe runs along x_r
+HORIZONTAL_AXIS, VERTICAL_AXIS = 1, 0  # the stripes run along y_r and x_r
 
 
-class WeldConfig(eqx.Module):
-    """Settings of the bead detector (mm unless stated).
+@pytree_dataclass
+class WeldConfig:
+    """Settings of the bead detector (mm unless stated; a pytree without equinox, issue 13).
 
     threshold_mm: height above the plate that starts a bead run (~0.3 mm).
     min_height_mm / min_width_mm / max_width_mm: a bead outside these is not found.
@@ -80,13 +81,12 @@ class WeldConfig(eqx.Module):
     sigma_floor_mm: lowest plate-noise scale used by the robust fit.
     fit_scale_mm: circle-fit RMS at which its confidence factor is 0.5.
     junction_min_confidence: a vertical-stripe bead at least this confident is a junction.
-    n_huber / n_tukey: IRLS iterations (static: they shape the compiled loop).
+    n_huber / n_tukey / n_cap: IRLS iterations; cap-model Gauss–Newton steps (static).
     n_gauss_newton / n_robust: Gauss–Newton steps per circle fit, and Tukey reweightings of
         the circle fit (its residual scale: 1.4826·MAD, at least twice the plate noise).
     centre: the bead's position: "cap" (the cap model fitted to the bead and the plate
         within `cap_margin_mm` of it, `_cap_fit`), "toes" (midpoint of the threshold
         crossings) or "apex" (of the circle fitted to the run alone); see `stripe_feature`.
-    n_cap: Gauss–Newton steps of the cap model fit.
     crossing_mask_mm: vertical-stripe points this close (x_r) to the horizontal stripe are
         left out of the junction search (`weld_features`).
     crossing_background_mm: on the vertical stripe, heights are measured against the lowest
@@ -105,15 +105,15 @@ class WeldConfig(eqx.Module):
     sigma_floor_mm: float = 0.02
     fit_scale_mm: float = 0.15
     junction_min_confidence: float = 0.3
-    n_huber: int = eqx.field(static=True, default=5)
-    n_tukey: int = eqx.field(static=True, default=8)
-    n_gauss_newton: int = eqx.field(static=True, default=4)
-    n_robust: int = eqx.field(static=True, default=3)
-    centre: str = eqx.field(static=True, default="cap")
+    n_huber: int = static(5)
+    n_tukey: int = static(8)
+    n_gauss_newton: int = static(4)
+    n_robust: int = static(3)
+    centre: str = static("cap")
     crossing_mask_mm: float = 5.0
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
-    n_cap: int = eqx.field(static=True, default=8)
+    n_cap: int = static(8)
 
 
 class WeldFeature(NamedTuple):

@@ -223,21 +223,26 @@ def fill_clipped(mono, clipped, *, axis: int = 0, max_run: int = MAX_RUN):
 
 def _flanks_rows(m, c):
     """Per pixel: the last unclipped row ≤ i and its value, the first ≥ i and its value
-    (-1 / n and 0 where there is none), in one scan down and up the rows at once."""
+    (-1 / n and 0 where there is none), in one scan down and up the rows at once.
+
+    The two directions travel stacked, (2, W) per step: 2 slices in and 2 updates out a
+    step instead of 5 and 4 (issue 13: same outputs; 400 interleaved calls at load 5, the
+    114×640 band of rows 0.76 → 0.70 ms, the 480×178 band of columns 1.96 → 1.64 ms).
+    """
     n, w = m.shape
-    i = jnp.arange(n, dtype=jnp.int32)
 
     def step(carry, xs):
-        ia, va, ib, vb = carry
-        k, ca, ma, cb, mb = xs
-        ia, va = jnp.where(ca, ia, k), jnp.where(ca, va, ma)
-        ib, vb = jnp.where(cb, ib, n - 1 - k), jnp.where(cb, vb, mb)
-        return (ia, va, ib, vb), (ia, va, ib, vb)
+        k, index, value = carry
+        clipped, mono = xs
+        here = jnp.stack([k, n - 1 - k])[:, None]
+        index, value = jnp.where(clipped, index, here), jnp.where(clipped, value, mono)
+        return (k + 1, index, value), (index, value)
 
-    none = jnp.zeros((w,), m.dtype)
-    init = (jnp.full((w,), -1, jnp.int32), none, jnp.full((w,), n, jnp.int32), none)
-    _, (above, fa, below, fb) = lax.scan(step, init, (i, c, m, c[::-1], m[::-1]))
-    return above, fa, below[::-1], fb[::-1]
+    start = jnp.broadcast_to(jnp.asarray([-1, n], jnp.int32)[:, None], (2, w))
+    init = (jnp.zeros((), jnp.int32), start, jnp.zeros((2, w), m.dtype))
+    xs = (jnp.stack([c, c[::-1]], 1), jnp.stack([m, m[::-1]], 1))
+    _, (index, value) = lax.scan(step, init, xs)
+    return index[:, 0], value[:, 0], index[::-1, 1], value[::-1, 1]
 
 
 # Kurtosis of a colour space from the channels' moments. I − μ = w·d (d: the centred RGB of a

@@ -16,14 +16,17 @@ the cross (the tracker). The calibration file is `cslx.sensor.calibration_file`
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
 
+from ..pytree import pytree_dataclass, static
 from .camera import Camera, pixel_to_ray
+
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, ArrayLike, Float
 
 __all__ = [
     "CalibrationError",
@@ -44,8 +47,12 @@ class CalibrationError(ValueError):
     """A calibration file or calibration input that cannot be used, with the reason."""
 
 
-class Sensor(eqx.Module):
+@pytree_dataclass(eq=False)
+class Sensor:
     """Camera, its laser planes (a cross: two; a line laser: one) and the camera-to-robot transform.
+
+    An immutable pytree like `cslx.sensor.camera.Camera` (a frozen dataclass, not an
+    `equinox.Module`: the tracker's start-up, issue 13).
 
     Attributes:
         camera: intrinsics and distortion.
@@ -62,7 +69,7 @@ class Sensor(eqx.Module):
     planes: Float[Array, "p 3"]
     R_cr: Float[Array, "3 3"]
     T_cr: Float[Array, 3]
-    stripes: tuple[str, ...] | None = eqx.field(static=True, default=None)
+    stripes: tuple[str, ...] | None = static(None)
 
     @property
     def plane_stripes(self) -> tuple[str, ...]:

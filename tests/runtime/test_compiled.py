@@ -1,5 +1,9 @@
 """`cslx.runtime.compiled`: an exported program reloaded gives jit's results."""
 
+import pathlib
+import subprocess
+import sys
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -65,3 +69,62 @@ def test_cached_program_reloads_without_build(tmp_path):
         np.testing.assert_array_equal(np.asarray(n), [1, 2, 3])
     cached_program("other", build, directory=tmp_path)
     assert len(calls) == 2
+
+
+def _cumsum_build():
+    def fn(x, a):
+        return (jnp.cumsum(x) * a,)
+
+    spec = jax.ShapeDtypeStruct((6,), jnp.float32)
+    return fn, (spec, jnp.asarray(1.5, jnp.float32)), {}
+
+
+def test_program_in_jax_cache_is_still_saved_runnable(tmp_path):
+    """The file holds a freshly compiled executable even when JAX's persistent cache already
+    has the program (one read back from that cache serialises without its machine code and
+    fails when run: "Function … not found")."""
+    from jax.experimental.compilation_cache import compilation_cache
+
+    old = (
+        jax.config.jax_compilation_cache_dir,
+        jax.config.jax_persistent_cache_min_compile_time_secs,
+    )
+    compilation_cache.reset_cache()
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "xla"))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    try:
+        fn, args, _ = _cumsum_build()
+        jax.jit(fn).lower(*args).compile()  # now in JAX's persistent cache
+        assert list((tmp_path / "xla").iterdir())
+        cached_program("c", _cumsum_build, directory=tmp_path / "prog")
+        again, args2, _ = cached_program("c", lambda: 1 / 0, directory=tmp_path / "prog")
+        x = jnp.arange(6.0, dtype=jnp.float32)
+        (y,) = again(x, *args2[1:])
+        np.testing.assert_allclose(np.asarray(y), np.cumsum(np.arange(6.0)) * 1.5)
+    finally:
+        jax.config.update("jax_compilation_cache_dir", old[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", old[1])
+        compilation_cache.reset_cache()
+
+
+def test_reload_in_a_fresh_process_skips_scipy(tmp_path):
+    """A reload deserialises the executable: no lowering, so no LAPACK set-up importing SciPy
+    (≈ 0.2 s of the tracker's cached start, issue 13)."""
+    code = (
+        "import sys, jax, jax.numpy as jnp, numpy as np; "
+        "sys.path.insert(0, 'tests/runtime'); from test_compiled import _cumsum_build; "
+        "from cslx.runtime.compiled import cached_program; "
+        f"call, args, _ = cached_program('c', _cumsum_build, directory={str(tmp_path)!r}); "
+        "(y,) = call(jnp.arange(6.0, dtype=jnp.float32), *args[1:]); "
+        "print(float(y[-1]), 'scipy' in sys.modules)"
+    )
+    root = pathlib.Path(__file__).resolve().parents[2]
+    runs = [
+        subprocess.run(
+            [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.split()
+        for _ in range(2)
+    ]
+    assert len(list((tmp_path / "cslx-export").iterdir())) == 1
+    assert runs[0][0] == runs[1][0] == str(15.0 * 1.5)
+    assert runs[1][1] == "False"  # the second process reloaded the file

@@ -226,6 +226,32 @@ def test_default_rig_keeps_sigma_2(tracker, frames):
     assert sum("compiled" in line for line in tracker.lines) == 1
 
 
+def test_first_frame_check_is_bounded(tracker, frames, monkeypatch):
+    """While no frame shows both stripes, the σ / colour check (≈ 27 ms) runs on the first 8
+    frames after a reset, then on every 16th (`cslx.runtime.stripe_width.check_due`), and not
+    again once a frame has measured both stripes."""
+    import cslx.runtime.tracker as module
+
+    checked = []
+    widths = module.stripe_widths
+
+    def counted(*args, **kwargs):
+        checked.append(tracker.frame - 1)
+        return widths(*args, **kwargs)
+
+    monkeypatch.setattr(module, "stripe_widths", counted)
+    tracker.reset()
+    black = np.zeros(tracker.image_shape, np.uint8)
+    for _ in range(40):
+        assert tracker.step(black).status == "black frame"
+    assert checked == [*range(8), 23, 39]
+    for _ in range(30):
+        tracker.step(frames[0][1], odometry=0.0)
+    assert checked == [*range(8), 23, 39, 55]  # the stripes decided on frame 55
+    assert min(tracker.stripe_width_px) > 0 and tracker.sigma == 2.0
+    tracker.reset()
+
+
 def test_green_laser_gets_bright_weights(tracker):
     """`cslx.runtime.stripe_colour`: R − G sees a green laser's stripes dark; the tracker
     switches to the searched space on the first frame (audit seed 8800, clean T scene) and

@@ -512,3 +512,43 @@ def test_bad_inputs_raise_clear_errors():
         med(I, L=5, delay="peak")
     with pytest.raises(ValueError, match="symmetric"):
         med(I, L=5, delay="centre")
+
+
+@pytest.mark.parametrize("warm", [False, True])
+def test_unrolled_fixed_point_is_the_solver_loop(warm):
+    """`med`'s straight-line fixed point (≤ `UNROLL_STEPS` steps) takes the solver's
+    iterates, stopping rule and step count (from the converged filter it stops early)."""
+    import optimistix as optx
+
+    from cslx.segmentation import med as med_module
+
+    I = jnp.asarray(stripe_image(64, 96, 30 + 3 * np.sin(np.arange(96) / 9), seed=3))
+    pb = med_prepare(I, axis=0, L=16)
+
+    def step(y, args):
+        W_new, st = med_fft.update(y[0], args, 1e-9, True)
+        return W_new, st.ratio_sum
+
+    W0 = med(I, axis=0, L=16, symmetric=True, max_steps=60).filter if warm else "flat"
+    y0 = (initial_filter(W0, 16, I.dtype), jnp.zeros((), I.dtype))
+    norm, tol = med_module._kurtosis_change, 1e-4
+    seen = set()
+    for k in range(1, med_module.UNROLL_STEPS + 1):
+        y, steps, done = med_module._unrolled(step, y0, pb, tol, k)
+        solver = optx.FixedPointIteration(rtol=tol, atol=tol * 1e-6, norm=norm)
+        sol = optx.fixed_point(step, solver, y0, args=pb, max_steps=k, throw=False)
+        assert int(steps) == int(sol.stats["num_steps"])
+        assert bool(done) == bool(sol.result == optx.RESULTS.successful)
+        np.testing.assert_allclose(np.asarray(y[0]), np.asarray(sol.value[0]), atol=1e-12)
+        seen.add((int(steps), bool(done)))
+    assert any(done for _, done in seen) == warm  # the stopping rule was exercised
+
+
+def test_static_centre_delay_is_the_traced_shift():
+    """`shifted_output` with a Python-number delay (constant phase) equals the traced one."""
+    I = jnp.asarray(stripe_image(64, 96, 30 + 3 * np.sin(np.arange(96) / 9), seed=4))
+    pb = med_prepare(I, axis=0, L=16)
+    W = jnp.asarray(np.hanning(16))
+    got = med_fft.shifted_output(W, 7.5, pb)
+    ref = jax.jit(med_fft.shifted_output)(W, jnp.asarray(7.5), pb)
+    np.testing.assert_allclose(np.asarray(got), np.asarray(ref), rtol=1e-10, atol=1e-10)

@@ -1,0 +1,70 @@
+"""The heading from the recent path (`PathHeading`) with the weld-line filter."""
+
+import math
+
+import numpy as np
+
+from cslx.runtime.line_filter import KalmanConfig, WeldLineFilter, robust_line
+from cslx.runtime.path_heading import PathHeading
+
+X_REF = 150.0
+THETA = math.radians(1.1)
+
+
+def _settle(seed: int = 3):
+    """A filter and its path window after 40 accepted beads along a weld at 1.1°, ten of
+    them (frames 20–29) biased so that they alone lie on a line 2.2° steeper (a glint's
+    bias that drifts); then 20 frames (30 mm) without a bead, as along the bar of a T: the
+    window keeps frames 20–39, half of them biased."""
+    rng = np.random.default_rng(seed)
+    c = KalmanConfig()
+    kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
+    travelled = 0.0
+    for k in range(40):
+        if k:
+            kf.predict(1.5, 0.0)
+            path.move(1.5, 0.0)
+            travelled += 1.5
+        bias = 2.0 * math.tan(THETA) * 1.5 * (k - 30) if 20 <= k < 30 else 0.0
+        y = math.tan(THETA) * travelled + bias + rng.normal(0.0, 0.05)
+        ok = kf.update(X_REF, y, 0.6)
+        path.update(kf, X_REF, y, 0.6, 14.0, ok)
+    for _ in range(20):
+        kf.predict(1.5, 0.0)
+        path.move(1.5, 0.0)
+        travelled += 1.5
+    return kf, path, travelled
+
+
+def test_a_rejected_bead_does_not_fuse_the_stale_window():
+    """After coasting, a bead the gate rejects leaves the filter as it was: the window of
+    old centres (here biased) is not fused (with the old rule the heading went ≈ 1° off)."""
+    kf, path, travelled = _settle()
+    x0, p0 = kf.x.copy(), kf.P.copy()
+    assert abs(math.degrees(kf.x[1] - THETA)) < 0.2
+    h = path.points  # the stale window alone is well off, and coasting broadened the filter
+    _, th_window, _ = robust_line(h[:, 0], h[:, 1], h[:, 2], X_REF, 0.15, 3.0)
+    assert abs(math.degrees(th_window - THETA)) > 0.5
+    assert math.degrees(math.sqrt(kf.P[1, 1])) > 2.0
+    ok = kf.update(X_REF, -43.0, 0.05)  # a bead on the crossing weld, far off
+    assert not ok
+    th, sd = path.update(kf, X_REF, -43.0, 0.05, 14.0, ok)
+    assert abs(math.degrees(kf.x[1] - THETA)) < 0.2  # the old rule: 2.19°, 1.09° off
+    np.testing.assert_array_equal(kf.x, x0)
+    np.testing.assert_array_equal(kf.P, p0)
+    assert math.isnan(th) and math.isnan(sd)
+    # the window still holds the old centres, and an accepted bead fuses it again
+    y = math.tan(THETA) * travelled
+    ok = kf.update(X_REF, y, 0.6)
+    assert ok
+    th, _ = path.update(kf, X_REF, y, 0.6, 14.0, ok)
+    assert math.isfinite(th)
+
+
+def test_restart_forgets_the_window():
+    kf, path, _ = _settle()
+    assert len(path.points) > 6
+    kf.start(5.0)
+    kf.restarts += 1
+    path.update(kf, X_REF, 5.0, 0.6, 14.0, True)
+    assert len(path.points) == 1
