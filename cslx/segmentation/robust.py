@@ -117,11 +117,7 @@ averages out): the goal's median is near that floor even without speckle.
    (seeds 41–46): RMS 0.027–0.069 → 0.019–0.066 px (mean 0.043 → 0.037), largest distance
    0.242 → 0.241 px. Cost: the smoothing 1.0 → 3.7 ms per stripe (load 11; whole frames
    under that load scattered 47–133 ms per frame and stripe, before and after alike).
-   Where the profile fits hold (`cslx.segmentation.profile`: a Gaussian with a linear
-   background fitted to each column, weighted for multiplicative speckle; no clipped core,
-   not at the path's ends) their centres replace the derivative's: development frames
-   median 0.035 / 0.039 → 0.031 / 0.033 mm, p95 0.153 / 0.169 → 0.145 / 0.153 mm,
-   detection and flat wall unchanged (`refine.second_pass`). Cost ≈ 15 ms per stripe.
+   Where they hold, speckle-weighted profile fits replace its centres (`refine.second_pass`).
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
