@@ -103,6 +103,13 @@ def band_image(
     shape = list(rgb.shape)
     shape[axis] = outer
     sub = lax.dynamic_slice(rgb, starts, shape)
+    if axis == 1 and fill:
+        # The fill scans along the rows' axis with the columns leading: transpose the uint8
+        # band once and the finished band once, rather than the colour image, the mask and
+        # the fill's four flank arrays (the same values; 480×128 band 2.04 → 1.38 ms,
+        # 400 interleaved calls, load 6, issue 13).
+        I = _monochrome(jnp.transpose(sub, (1, 0, 2)), weights, dtype, fill, 0)
+        return lax.dynamic_slice_in_dim(I, start - o0, size, axis=0).T
     I = _monochrome(sub, weights, dtype, fill, axis)
     if outer == size:
         return I
