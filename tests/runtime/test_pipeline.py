@@ -36,8 +36,9 @@ def test_jit_equals_eager(scene):
     sensor, config, frames = scene
     img = frames[0][0]
     state = init_state(config, sensor.camera.image_size)
-    # from a cold state the compiled tracking program runs its full-frame branch
-    r_jit, s_jit = process_frame(sensor, config, img, state)
+    # the full-frame program (a cold frame with the ROI allowed takes first-pass bands,
+    # tested in test_roi_keeps_accuracy_and_batch_equals_frames)
+    r_jit, s_jit = process_frame(sensor, config, img, state, roi=False)
     assert not bool(r_jit.used_roi)
     r_eager, s_eager = _process(sensor, config, jnp.asarray(img), state, False)
     both = np.asarray(r_jit.centres_h.valid & r_eager.centres_h.valid)
