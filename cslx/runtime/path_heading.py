@@ -20,13 +20,15 @@ that bead: 18.98 → 0.76 mm). With the cap-model bead of `cslx.runtime.weld`: 4
 tracking sequences (seeds 7301, 7302, 7305, 1201–1203) identical. Figure 22, error after the
 turn, mean / max, fusing on rejected frames → not: sunny 2203 and 2204 and shadow 2201
 identical; glare 2201 0.385 / 1.529 → 0.215 / 0.872 mm, glare 2204 0.248 / 0.946 → 0.240 /
-0.842 mm; sunny 2201 0.280 / 0.715 → 0.332 / 1.368 mm: there the stale window was fused on
-three rejected frames while coasting, once away from the true heading (1.48° → 1.63°, true
-0.91°) and once towards it (→ 1.21°); without them the robot coasted with 1.46° and came
-onto the bar 0.65 mm farther off its centre line; glare 2203 0.060 / 0.178 → 0.077 / 0.503
-mm, although the heading carried into the coast was nearer the truth (1.14° against 1.26°,
-true 1.09°). In each pair the last junction report was the same; the error after the turn
-varies with the path of the coast to the T, by ±0.6 mm either way here.
+0.842 mm, shadow 2203 0.227 / 1.050 → 0.177 / 0.780 mm, shadow 2204 0.204 / 0.677 → 0.192 /
+0.784 mm, clean 2203 0.123 / 0.760 → 0.137 / 0.859 mm (clean 2201 identical); sunny 2201
+0.280 / 0.715 → 0.332 / 1.368 mm: there the stale window was fused on three rejected frames
+while coasting, once away from the true heading (1.48° → 1.63°, true 0.91°) and once towards
+it (→ 1.21°); without them the robot coasted with 1.46° and came onto the bar 0.65 mm
+farther off its centre line; glare 2203 0.060 / 0.178 → 0.077 / 0.503 mm, although the
+heading carried into the coast was nearer the truth (1.14° against 1.26°, true 1.09°). In
+each pair the last junction report was the same; the error after the turn varies with the
+path of the coast to the T, by ±0.6 mm either way here.
 """
 
 from __future__ import annotations
