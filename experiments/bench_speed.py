@@ -938,8 +938,16 @@ def _subprocess(*args: str, timeout: float = 1800) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    # As a module, so that the `experiments` package (`cslx.environment.configure`) loads
+    # before this script's NumPy: run as a file, the package came after NumPy and its BLAS
+    # limit then imported SciPy (≈ 0.1 s CPU of the start-up worker that no robot pays).
     proc = subprocess.run(
-        [sys.executable, __file__, *args], capture_output=True, text=True, env=env, timeout=timeout
+        [sys.executable, "-m", "experiments.bench_speed", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=timeout,
+        cwd=ROOT,
     )
     if proc.returncode != 0:
         raise RuntimeError(f"bench worker {args} failed:\n{proc.stderr[-3000:]}")
