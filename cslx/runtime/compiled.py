@@ -42,6 +42,25 @@ has it) saves ≈ 0.05 s CPU more. What is left (CPU, quiet machine): importing 
 ≈ 0.45 s, cslx's modules ≈ 0.05 s, XLA's deserialisation of the executable ≈ 0.45–0.5 s, the
 first frame (the σ / colour check and the program) ≈ 0.05 s.
 
+Later, with ml_dtypes 0.7.0 installed (JAX imports it), the start-up went back up: its
+import takes 0.55 s CPU (0.6.0: 0.01 s; most of it in NumPy's ``PyUFunc_AddLoop`` comparing
+the signatures of the ufunc loops it registers), so pyproject.toml asks for
+``ml_dtypes<0.7``. `cslx track --dry-run --max-frames 1` on a PNG folder, process start →
+first frame, 5 interleaved pairs at load 8.3–8.6 (fresh processes, wall s / CPU s, medians):
+3.39 / 1.66 (0.7.0) → 2.21 / 1.10 (0.6.0). Where the 1.10 s CPU goes: interpreter and
+`cslx.cli` 0.04, `configure`, logging and the runtime's light modules 0.05, NumPy 0.06, JAX
+0.32, the tracker's modules, cv2 and the calibration file 0.03, XLA's deserialisation of the
+executable 0.54 (on one XLA thread, the caller waiting with the GIL released), the first
+frame 0.06 (PNG decode, the σ / colour check 0.03, the program's first run; the second frame
+0.025). Tried and not adopted: loading the executable in a background thread while the first
+frame is decoded and checked (the work it could overlap is ≈ 0.04 s CPU, below the scatter
+here); locations capped (``jax_traceback_in_locations_limit`` 0: 3.6 → 3.1 MB,
+deserialisation 0.49 → 0.46 s CPU, 5 pairs); glibc's fast bins off (``mallopt(M_MXFAST,
+0)``: 0.50 → 0.46 s CPU, 4 pairs); the garbage collector off during start-up saves 0.05 s
+CPU (as before). What remains is JAX's import and XLA's rebuilding of the program's ≈ 17 000
+HLO instructions: a smaller first-frame program (one Steger copy instead of one per
+`lax.cond` branch) is the next lever.
+
 Before, a cached start deserialised a `jax.export.Exported` (the StableHLO), lowered the
 wrapper calling it (0.34 s, 0.21 s of it importing SciPy: the lowering of an exported call
 sets up JAX's LAPACK kernels, which load SciPy, although this program calls no LAPACK) and
