@@ -32,6 +32,17 @@ values, 24 shifted selects per side. Kept: `fill_clipped` as one `lax.scan` alon
 (band of rows 1.56 → 0.43 ms alone, band of columns 2.1 → 0.99 ms) and the junction's apex
 arg-max as two reductions (1.67 → 0.96 ms); together the tracking call went 14.64 →
 12.78 ms (200 interleaved frames, load 3.6–3.8, identical outputs).
+
+Two more reads of a band, found in a per-kernel profile of the tracking program (issue 13;
+`jax.profiler`, each kernel's 10th-percentile duration × its calls): the clipped mask as a
+maximum over the length-3 channel axis went to a reduction kernel of ≈ 0.2 ms per band, and
+the pipeline's ``jnp.where(ok, MED output, band)`` (``ok`` a scalar) was fused into
+Steger's reflect padding, which then read the band through the cut's transpose in four
+padding kernels of ≈ 0.1 ms. Now `clipped_mask` takes the maximum channel by channel and
+the pipeline chooses with `lax.cond`: band cuts h 0.93 → 0.83 ms, v 1.24 → 1.04 ms (150
+interleaved calls, load 7.5–8.7); cut + MED + Steger of both bands 6.70 → 5.83 ms (300,
+load 8.3–8.5); the tracking call 10.20 → 9.37 ms (300 interleaved frames,
+`experiments.ab_tracking`, load 8.7–10.9); identical outputs.
 """
 
 from __future__ import annotations

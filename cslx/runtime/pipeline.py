@@ -277,7 +277,7 @@ def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med, symmetri
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
-        B = jnp.where(ok, r.output, I)
+        B = lax.cond(ok, lambda: r.output, lambda: I)  # not a select (band_input's notes)
         steps, kurt = r.steps.astype(jnp.int32), jnp.where(ok, r.kurtosis, jnp.nan)
     else:
         W, B, steps, kurt = W0, I, jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan, I.dtype)

@@ -186,8 +186,8 @@ SMOOTH_PATH = True
 
 def clipped_mask(image, clip_level: float = CLIP_LEVEL):
     """(H, W) True where any channel of an 8-bit-scaled RGB frame is at `clip_level` or above."""
-    image = jnp.asarray(image)
-    return jnp.max(image, axis=-1) >= clip_level
+    channels = jnp.unstack(jnp.asarray(image), axis=-1)  # no reduction over the minor axis
+    return functools.reduce(jnp.maximum, channels) >= clip_level
 
 
 @functools.partial(jax.jit, static_argnames=("axis", "max_run"))

@@ -1,0 +1,111 @@
+"""Tracking-mode frame time of the working tree against a git revision, in one process.
+
+The machine is shared and its load drifts, so a speed change is judged only against the
+code before it, timed in the same process with the calls interleaved: the revision's
+``cslx`` package is exported (`git archive`) into a temporary folder under another name and
+imported beside the working tree's. Both run the tracking mode of `experiments.bench_speed`
+(`process_frame` with the default `PipelineConfig`, MED in the bands, consecutive rendered
+sunny video frames, seed 0, each its own state carried from frame to frame), alternating
+which goes first. Reported: median, p10 and p90 per frame, the load, and the largest
+difference between the two programs' outputs over the first frames (0 when the change
+keeps the outputs bit for bit).
+
+    OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev HEAD~1 --calls 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import io
+import pathlib
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+
+import numpy as np
+
+from experiments.bench_speed import ping_pong, video_frames
+from experiments.common import ROOT, load_average
+
+
+def export_revision(rev: str, folder: pathlib.Path, name: str) -> None:
+    """``cslx`` of git revision ``rev`` as the package ``name`` under ``folder``."""
+    tar = subprocess.run(
+        ["git", "archive", rev, "cslx"], cwd=ROOT, check=True, capture_output=True
+    ).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as archive:
+        archive.extractall(folder, filter="data")
+    (folder / "cslx").rename(folder / name)
+
+
+def tracker(package: str, frame):
+    """(step, state) of the tracking mode of ``package`` after a few warm-up frames."""
+    import jax
+    import jax.numpy as jnp
+
+    pipeline = importlib.import_module(f"{package}.runtime.pipeline")
+    sensor = importlib.import_module(f"{package}.sensor").default_sensor()
+    sensor = jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x, jnp.float32) if isinstance(x, jax.Array) else x, sensor
+    )
+    config = pipeline.PipelineConfig()
+    state = pipeline.init_state(config, sensor.camera.image_size)
+
+    def step(rgb, state):
+        result, state = pipeline.process_frame(sensor, config, rgb, state)
+        return jax.block_until_ready((result, state))
+
+    for _ in range(3):
+        _, state = step(frame, state)
+    return step, state
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rev", default="HEAD", help="git revision to compare against")
+    ap.add_argument("--calls", type=int, default=300, help="timed frames per program")
+    ap.add_argument("--frames", type=int, default=24, help="video frames (ping-pong)")
+    ap.add_argument("--seed", type=int, default=0, help="video seed (bench_speed's)")
+    args = ap.parse_args(argv)
+    import jax
+
+    frames = [jax.numpy.asarray(f) for f in video_frames(args.frames, args.seed)]
+    load_start = load_average()
+    with tempfile.TemporaryDirectory() as tmp:
+        export_revision(args.rev, pathlib.Path(tmp), "cslx_rev")
+        sys.path.insert(0, tmp)
+        runs = {name: tracker(name, frames[0]) for name in ("cslx_rev", "cslx")}
+        states = {name: state for name, (_, state) in runs.items()}
+        times = {name: [] for name in runs}
+        outputs = {name: [] for name in runs}
+        for k, i in enumerate(ping_pong(len(frames), args.calls)):
+            for name in list(runs)[:: 1 if k % 2 else -1]:
+                t = time.perf_counter()
+                result, states[name] = runs[name][0](frames[i], states[name])
+                times[name].append(time.perf_counter() - t)
+                if k < 2 * len(frames):
+                    leaves = jax.tree_util.tree_leaves(result)
+                    outputs[name].append(np.concatenate([np.ravel(x) for x in leaves]))
+    diff = max(
+        float(np.nanmax(np.abs(a.astype(float) - b.astype(float))))
+        for a, b in zip(outputs["cslx_rev"], outputs["cslx"], strict=True)
+    )
+    nan_mismatch = sum(
+        int(np.sum(np.isnan(a.astype(float)) != np.isnan(b.astype(float))))
+        for a, b in zip(outputs["cslx_rev"], outputs["cslx"], strict=True)
+    )
+    print(f"load {load_start} → {load_average()}; {args.calls} interleaved frames each")
+    for name, label in (("cslx_rev", f"revision {args.rev}"), ("cslx", "working tree")):
+        ms = np.asarray(times[name]) * 1e3
+        print(
+            f"{label:24s} median {np.median(ms):.2f} ms, p10 {np.percentile(ms, 10):.2f}, "
+            f"p90 {np.percentile(ms, 90):.2f}"
+        )
+    print(f"outputs: max |difference| {diff:.3g}, NaN mismatches {nan_mismatch}")
+
+
+if __name__ == "__main__":
+    main()
