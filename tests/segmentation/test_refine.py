@@ -6,7 +6,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cslx.segmentation.refine import REACH, refine_centres
+from cslx.segmentation.refine import (
+    BLEND,
+    BLEND_MAX_CLIPPED,
+    FIT_BORDER,
+    FIT_MAX_CLIPPED,
+    REACH,
+    _fitted,
+    refine_centres,
+)
 
 
 def _curved(h=240, w=320, s=1.2):
@@ -58,3 +66,32 @@ def test_keeps_invalid_and_unfound_centres():
     np.testing.assert_allclose(pos[100:110], start[100:110], rtol=0, atol=1e-4)
     assert found[50:100].all()
     assert np.abs(pos[50:100] - truth[50:100]).max() < 0.02
+
+
+@pytest.mark.parametrize(
+    ("clipped", "share"),
+    [(2, 1.0), (BLEND_MAX_CLIPPED - 2, BLEND), (BLEND_MAX_CLIPPED + 3, 0.0)],
+)
+def test_fit_blend_and_derivative_by_clipped_pixels(clipped, share):
+    """Where the fit holds, the centre is the fit's with at most FIT_MAX_CLIPPED clipped
+    pixels near the path, the BLEND mean with the derivative's up to BLEND_MAX_CLIPPED, and
+    the derivative's beyond."""
+    assert FIT_MAX_CLIPPED < BLEND_MAX_CLIPPED - 2
+    h, w = 120, 200
+    u = np.arange(w, dtype=float)
+    truth = 60.0 + 0.03 * u
+    v = np.arange(h, dtype=float)[:, None]
+    rng = np.random.default_rng(3)
+    image = 10.0 + 200.0 * np.exp(-0.5 * ((v - truth[None, :]) / 1.5) ** 2)
+    image = (image + rng.normal(0.0, 1.0, image.shape)).astype(np.float32)
+    first = np.round(truth).astype(int)
+    rows = first[None, :] + np.arange(clipped)[:, None] - clipped // 2
+    mask = np.zeros((h, w), bool)
+    mask[rows, np.broadcast_to(u.astype(int), rows.shape)] = True
+    offset = 0.4  # a derivative's centre that is off by a constant, to tell the sources apart
+    pos = jnp.asarray(truth, jnp.float32)
+    use = jnp.ones(w, bool)
+    out = _fitted(jnp.asarray(image), pos, use, pos + offset, jnp.asarray(mask), sigma=2.5, axis=0)
+    inner = slice(FIT_BORDER + 10, -FIT_BORDER - 10)
+    shift = np.median(np.asarray(out)[inner] - truth[inner])
+    assert abs(shift - (1.0 - share) * offset) < 0.05
