@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from experiments.bench_speed import ping_pong, video_frames
+from experiments.bench_speed import ping_pong, sensor32, video_frames
 from experiments.common import ROOT, load_average
 
 
@@ -44,13 +44,9 @@ def export_revision(rev: str, folder: pathlib.Path, name: str) -> None:
 def tracker(package: str, frame):
     """(step, state) of the tracking mode of ``package`` after a few warm-up frames."""
     import jax
-    import jax.numpy as jnp
 
     pipeline = importlib.import_module(f"{package}.runtime.pipeline")
-    sensor = importlib.import_module(f"{package}.sensor").default_sensor()
-    sensor = jax.tree_util.tree_map(
-        lambda x: jnp.asarray(x, jnp.float32) if isinstance(x, jax.Array) else x, sensor
-    )
+    sensor = sensor32(package)
     config = pipeline.PipelineConfig()
     state = pipeline.init_state(config, sensor.camera.image_size)
 

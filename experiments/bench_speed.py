@@ -122,12 +122,15 @@ def ping_pong(n: int, count: int) -> list[int]:
     return [cycle[i % len(cycle)] for i in range(count)]
 
 
-def sensor32():
+def sensor32(package: str = "cslx"):
+    """The default sensor in float32, from ``package`` (another name for a revision's cslx
+    in `experiments.ab_tracking`)."""
+    import importlib
+
     import jax
     import jax.numpy as jnp
 
-    from cslx.sensor import default_sensor
-
+    default_sensor = importlib.import_module(f"{package}.sensor").default_sensor
     return jax.tree_util.tree_map(
         lambda x: jnp.asarray(x, jnp.float32) if isinstance(x, jax.Array) else x,
         default_sensor(),
