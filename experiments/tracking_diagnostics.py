@@ -7,6 +7,26 @@ bead's confidence, width and status, where the vertical stripe crosses the horiz
 relative to the bead (y_r), and junction reports. A summary line per run gives the mean and
 the largest |measured bead error|, and how many frames' errors exceed 0.5 / 1 mm.
 
+What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12):
+
+- false T reports on the flank (7302 glare / shadow, 11 and 9 frames at x_r ≈ 147–150 mm):
+  the horizontal stripe's light disturbs the vertical stripe up to ≈ 8 mm before the
+  crossing; fixed by `cslx.runtime.weld.WeldConfig.crossing_mask_mm` 8 mm.
+- the > 1 mm offset tails in sun: single frames whose bead is measured 1.3–3.3 mm off with
+  a width far from the true one (23–28 or 10–15 mm for 14–19 mm beads), often at the start
+  of a pass (1201 beside sunny: frames 1–2 at +3.3 / +3.1 mm, the run's 3.09 mm maximum).
+  In those frames one flank of the bead has no centres at all over 5–8 mm: the stripe on the
+  sunlit flank stays under Steger's relative threshold (0.1 of the frame's strongest ridge;
+  the noise floor ``snr`` 5 → 3 changed nothing). Lowering the threshold to 0.05 everywhere
+  made 3 of 4 sunny runs worse (7301–7302, offset mean 0.206 → 0.303 mm over the 4).
+- tried and not kept, same runs, variant against default in one process: dropping each
+  stripe's centres within 6 px of the crossing (16 runs of 7301–7302: offset mean
+  0.143 → 0.136 mm, but the max worse in 6 runs and better in 6, 7302 flank shadow
+  0.34 → 0.70 mm; 1201 flank sunny heading 0.75 → 1.13°); over the 12 sun / glare / shadow
+  runs of 7301–7302 (default: offset mean 0.160, max 0.511 mm, heading 0.423° averaged over
+  the runs), a confidence factor for a bead toe without profile points 0.158 / 0.488 /
+  0.451°, the Kalman width tolerance 0.2 → 0.1 0.150 / 0.504 / 0.428°: no clear gain.
+
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
 """
@@ -23,7 +43,9 @@ from experiments.tracking_sequences import NUISANCES, PLACEMENTS, make_sequence,
 
 def _recording(tracker):
     """Wrap the tracker's compiled steps so that each frame's profiles are kept."""
-    seen: dict[str, np.ndarray] = {}
+    # one record per tracker: its steps stay wrapped from one sequence to the next
+    seen: dict[str, np.ndarray] = vars(tracker).setdefault("diag_profiles", {})
+    seen.clear()
 
     def wrap(fn):
         if getattr(fn, "_diag", False):
