@@ -57,16 +57,8 @@ from .small_ops import masked_median, solve_spd
 
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
     from jaxtyping import Array, ArrayLike, Bool, Float
-__all__ = [
-    "WeldConfig",
-    "WeldFeature",
-    "WeldLine",
-    "plate_fit",
-    "stripe_feature",
-    "weld_features",
-    "weld_line_from_features",
-    "heading_from_vertical",
-]
+__all__ = ["WeldConfig", "WeldFeature", "WeldLine", "plate_fit", "stripe_feature"]
+__all__ += ["weld_features", "weld_line_from_features", "heading_from_vertical"]
 
 HORIZONTAL_AXIS, VERTICAL_AXIS = 1, 0  # the stripes run along y_r and x_r
 
