@@ -57,16 +57,8 @@ from .small_ops import masked_median, solve_spd
 
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
     from jaxtyping import Array, ArrayLike, Bool, Float
-__all__ = [
-    "WeldConfig",
-    "WeldFeature",
-    "WeldLine",
-    "plate_fit",
-    "stripe_feature",
-    "weld_features",
-    "weld_line_from_features",
-    "heading_from_vertical",
-]
+__all__ = ["WeldConfig", "WeldFeature", "WeldLine", "plate_fit", "stripe_feature"]
+__all__ += ["weld_features", "weld_line_from_features", "heading_from_vertical"]
 
 HORIZONTAL_AXIS, VERTICAL_AXIS = 1, 0  # the stripes run along y_r and x_r
 
@@ -88,7 +80,14 @@ class WeldConfig:
         within `cap_margin_mm` of it, `_cap_fit`), "toes" (midpoint of the threshold
         crossings) or "apex" (of the circle fitted to the run alone); see `stripe_feature`.
     crossing_mask_mm: vertical-stripe points this close (x_r) to the horizontal stripe are
-        left out of the junction search (`weld_features`).
+        left out of the junction search (`weld_features`). 8 mm rather than 5 (issue 12):
+        where the stripes cross, the horizontal stripe's light moved the vertical stripe's
+        points over ≈ 142–152 mm for a crossing at 150 mm (rendered glare, flank, dev seed
+        7302), and a 2.9 mm bump 4.6 mm before the crossing, with the masked gap and the
+        plate beyond it, passed for a crossing bead: 11 and 9 false T frames in the flank
+        glare and shadow runs of dev seed 7302, none with 8 mm (recall there 96.9 → 100 %).
+        The other 46 dev runs (seeds 7301, 7302, 7305, 1201–1203, both placements, every
+        nuisance; experiments/tracking_diagnostics.py) were identical in every measure.
     crossing_background_mm: on the vertical stripe, heights are measured against the lowest
         point within this distance beyond (`cslx.runtime.junction.crossing_feature`); 0 uses
         the plate line alone. It must exceed the bar's half width (≈ 7–8 mm rendered) so
@@ -110,7 +109,7 @@ class WeldConfig:
     n_gauss_newton: int = static(4)
     n_robust: int = static(3)
     centre: str = static("cap")
-    crossing_mask_mm: float = 5.0
+    crossing_mask_mm: float = 8.0
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
     n_cap: int = static(8)
