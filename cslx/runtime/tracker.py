@@ -34,8 +34,12 @@ filter over s = (e, θ):
   state. As soon as the last `reset_after` (3) rejected centres in a row agree with each
   other (their spread at x_ref ≤ 2 `consistent_mm`: a new weld after a T-junction turn, a
   lateral jump, or a wrong prediction that locked the truth out) the filter restarts at
-  their mean, moved to x_ref with the current heading, with a broad covariance. A run of
-  rejections that never agree (clutter) restarts it only after `give_up_after` frames.
+  their mean, moved to x_ref with the current heading, with a broad covariance. The last
+  `trend_after` (4) rejected centres lying on a straight line in time (each within
+  `consistent_mm` of it: a steady drift that the lagging prediction keeps rejecting, such as
+  faster lateral motion than the filter expects, or a turn seen without odometry) restart it
+  at the line's latest value. A run of rejections that agree in neither way (clutter)
+  restarts it only after `give_up_after` frames.
   Where the rejected centres, carried by odometry, lie on a line whose direction
   contradicts the current heading (re-acquiring the crossing weld during the turn at a T,
   while the heading is still the old weld's, ≈ 90° off) the restart takes the line's

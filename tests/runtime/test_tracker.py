@@ -158,6 +158,40 @@ def test_gate_does_not_restart_on_disagreeing_clutter():
     assert kf.update(150.0, 30.0, 0.8) and kf.restarts == 1  # gives up: restarts anyway
 
 
+def _drift(config: KalmanConfig, rate: float = 1.2, seed: int = 9):
+    """A filter settled on a weld at y = 0, then the weld seen drifting sideways at `rate` mm
+    per frame (faster lateral motion than the filter's random walk expects, no odometry of
+    it). Returns the filter and, per drifting frame, (accepted, |estimate − truth|)."""
+    rng = np.random.default_rng(seed)
+    kf = WeldLineFilter(config, 150.0)
+    for _ in range(30):
+        kf.predict(1.5, 0.0)
+        kf.update(150.0, rng.normal(0, 0.1), 0.8)
+    rows = []
+    for k in range(1, 25):
+        kf.predict(1.5, 0.0)
+        truth = rate * k
+        ok = kf.update(150.0, truth + rng.normal(0, 0.1), 0.8)
+        rows.append((ok, abs(kf.x[0] - truth)))
+    return kf, rows
+
+
+def test_gate_reacquires_a_steady_drift():
+    """A prediction lagging a steady drift rejects the truth frame after frame while it moves
+    on, so the rejected centres never agree on one offset; that they lie on one line in time
+    restarts the filter after `trend_after` of them, not after `give_up_after`."""
+    c = KalmanConfig()
+    kf, rows = _drift(c)
+    first = next(i for i, (ok, _) in enumerate(rows) if not ok)
+    restart = first + c.trend_after - 1
+    assert not any(ok for ok, _ in rows[first:restart]) and rows[restart][0]
+    assert rows[restart][1] < 0.5  # restarted at the latest centre
+    assert max(err for _, err in rows[restart + 1 :]) < 1.5  # and follows the drift since
+    old, old_rows = _drift(KalmanConfig(trend_after=0))
+    assert not any(ok for ok, _ in old_rows[first : first + c.give_up_after - 1])
+    assert max(err for _, err in old_rows) > max(err for _, err in rows) + 2.0
+
+
 def _turn_onto_bar(config: KalmanConfig, seed: int = 6):
     """A filter settled on a weld along x_r, then the robot turns 90° left in place at a T
     whose bar passes through the robot's centre (its stripe at x_ref meets the bar at
