@@ -149,7 +149,7 @@ PROFILE_FIT = True
 #: within `FIT_BORDER` centres of the path's ends.
 FIT_CHI2 = 2.0
 FIT_SHARE = 0.8
-FIT_BORDER = 12
+FIT_BORDER = 0
 #: Most clipped pixels within REACH + 2σ of the path where the fit is used.
 FIT_MAX_CLIPPED = 3
 #: Where the fit holds but `FIT_MAX_CLIPPED` < clipped pixels ≤ `BLEND_MAX_CLIPPED` (a
@@ -157,6 +157,9 @@ FIT_MAX_CLIPPED = 3
 #: fit's and the derivative's, with weight `BLEND` on the fit's (`second_pass`).
 BLEND_MAX_CLIPPED = 7
 BLEND = 0.5
+#: Average the profile fit's centres along the path as offsets from the first pass's path,
+#: not as positions (`second_pass`, "Offsets, not positions").
+FIT_RELATIVE = True
 
 
 @functools.partial(jax.jit, static_argnames=("sigma", "axis"))
@@ -235,7 +238,36 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     unchanged, every figure (RMS ≤ 0.066 px, none beyond 0.5 px; the saturated cores clip 9+
     pixels). Cost: not measurable (second pass 12–19 ms either way, sunny frames, load 8).
 
-    Where the error is left, and what did not reduce it (same 36 development frames, H / V
+    Offsets, not positions (`FIT_RELATIVE`, issue 11). The fitted centres c_j are averaged
+    along the path as c_j − p_j (p the first pass's path) and added back to p_j, as the
+    derivative's along-path average does by construction; averaging the positions
+    themselves bent every curve towards its chord by ≈ c''σ²/2 (the bead's caps) and more
+    at its toes. Development frames (seeds 7100–7117, 2 frames × 18 conditions, H / V
+    median / p95 mm, same frames): 0.0304 / 0.137, 0.0327 / 0.150 → 0.0300 / 0.136,
+    0.0314 / 0.147 (clean caps median 0.075 → 0.041 mm H, 0.078 → 0.049 V). With offsets the
+    border gate `FIT_BORDER` (which kept the position average from extrapolating at the
+    path's ends) is no longer needed: 12 → 0 centres, 0.0300 / 0.135, 0.0313 / 0.144
+    (vertical border centres median / p95 0.072 / 0.295 → 0.060 / 0.257 mm); detection
+    (100 / 99.90 %) and gross (0.022 / 0.064 %) unchanged; flat wall (seeds 41–46): every
+    figure identical; no added cost (one subtraction per centre). Tried with it and not
+    kept: `SIGMA_REFINE` 5 / 8 (0.031 / 0.136, 0.031 / 0.145; 0.032 / 0.142, 0.036 /
+    0.148); `FIT_MAX_CLIPPED` 5 (0.030 / 0.132, 0.032 / 0.146); `BLEND` 0.7 (0.030 / 0.132,
+    0.032 / 0.146, V gross 0.070 %); running the whole second pass twice around its own
+    output (0.030 / 0.132, 0.032 / 0.147, H gross 0.035 %, +≈ 20 ms).
+
+    Where the error is left (after the above; development frames, regions by the true
+    path: caps > 0.3 px off a robust quadratic, toes within 10 centres of a bend, ±12
+    centres about the other stripe, 12 at the ends), H / V: plates (with or without a
+    clipped tip, 82 %) median 0.026–0.029 mm, p95 0.10–0.14, 41 / 45 % of the errors above
+    the p95; caps (8 %) 0.066 / 0.076, p95 0.23 / 0.30, 33 / 32 %; toes (2 / 0.5 %) 14 /
+    5 %; the crossing 9 / 3 %; the ends 3 / 16 %. The caps' error varies slowly
+    along the path (a 15-centre running mean keeps 83 / 89 % of its RMS) and is hardly
+    signed by the curvature (mean 0.02 px): glints and sheen on the bead (glare, sunny,
+    green, blue), not rounding. The vertical stripe's median is larger in mm although it is
+    smaller in pixels (0.026 against 0.030 px): its plane maps one pixel to 1.19 mm /
+    1.02 mm of the horizontal's (median ratio), so it needs 16 % less pixel error.
+
+    Before the offsets, and what did not reduce it (same 36 development frames, H / V
     median / p95 mm, before the blend: 0.031 / 0.145, 0.033 / 0.153). By the true path's shape:
     plates (87 / 89 % of the centres) 0.028 / 0.108, 0.031 / 0.120; bead caps (the true path >
     0.3 px off a robust quadratic through it; 7 / 6 %) 0.075 / 0.249, 0.082 / 0.367; within 10
@@ -293,7 +325,13 @@ def _fitted(mono, pos, use, derivative, clipped, *, sigma: float, axis: int):
     rows = jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32)[:, None] + jnp.arange(-near, near + 1)
     rows = jnp.clip(rows, 0, x.shape[1] - 1)
     n_clipped = jnp.sum(jnp.take_along_axis(x, rows, 1), axis=1)
-    mean, den = _along(jnp.nan_to_num(fit), found.astype(dtype), SIGMA_REFINE)
+    if FIT_RELATIVE:
+        # average the fitted offsets from the path, not the positions (see FIT_RELATIVE)
+        base = jnp.nan_to_num(pos)
+        off, den = _along(jnp.nan_to_num(fit) - base, found.astype(dtype), SIGMA_REFINE)
+        mean = base + off
+    else:
+        mean, den = _along(jnp.nan_to_num(fit), found.astype(dtype), SIGMA_REFINE)
     n = pos.shape[0]
     j = jnp.arange(n)
     first = jnp.min(jnp.where(use, j, n))

@@ -117,7 +117,7 @@ averages out): the goal's median is near that floor even without speckle.
    (seeds 41–46): RMS 0.027–0.069 → 0.019–0.066 px (mean 0.043 → 0.037), largest distance
    0.242 → 0.241 px. Cost: the smoothing 1.0 → 3.7 ms per stripe (load 11; whole frames
    under that load scattered 47–133 ms per frame and stripe, before and after alike).
-   Where they hold, speckle-weighted profile fits replace its centres (`refine.second_pass`).
+   Where they hold, speckle-weighted profile fits (offsets from the path) replace its centres.
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the

@@ -95,3 +95,25 @@ def test_fit_blend_and_derivative_by_clipped_pixels(clipped, share):
     inner = slice(FIT_BORDER + 10, -FIT_BORDER - 10)
     shift = np.median(np.asarray(out)[inner] - truth[inner])
     assert abs(shift - (1.0 - share) * offset) < 0.05
+
+
+def test_fit_averages_offsets_from_the_path_not_positions(monkeypatch):
+    """The fitted centres are averaged along the path as offsets from it (`FIT_RELATIVE`):
+    on a parabola with a bend the average then follows the curve, where averaging the
+    positions bends it towards its chord (c''σ²/2 ≈ 0.07 px on the parabola, more at the
+    bend)."""
+    from cslx.segmentation import refine
+
+    image, truth = _curved()
+    pos = jnp.asarray(truth + 0.3, jnp.float32)  # a first pass off by a constant
+    use = jnp.ones(len(truth), bool)
+    none = jnp.zeros(image.shape, bool)
+
+    def error(relative):
+        monkeypatch.setattr(refine, "FIT_RELATIVE", relative)
+        out = _fitted(jnp.asarray(image), pos, use, pos, none, sigma=2.5, axis=0)
+        return np.abs(np.asarray(out) - truth)[20:-20]
+
+    assert refine.FIT_RELATIVE
+    assert error(True).max() < 0.02
+    assert error(False).max() > 0.05
