@@ -49,6 +49,9 @@ __all__ = [
     "FIT_CHI2",
     "FIT_MAX_CLIPPED",
     "FIT_SHARE",
+    "PRECISION_CAP",
+    "PRECISION_POWER",
+    "PRECISION_WEIGHTS",
     "PROFILE_FIT",
     "REACH",
     "REFINE_CORRELATION",
@@ -66,7 +69,9 @@ STEP = 0.25
 
 
 @functools.partial(jax.jit, static_argnames=("sigma", "sigma_along", "axis"))
-def refine_centres(mono, pos, valid, *, sigma: float, sigma_along: float, axis: int):
+def refine_centres(
+    mono, pos, valid, *, sigma: float, sigma_along: float, axis: int, precision=None
+):
     """Centres re-measured around the path `pos` (module docstring).
 
     Args:
@@ -97,6 +102,8 @@ def refine_centres(mono, pos, valid, *, sigma: float, sigma_along: float, axis: 
     g = jnp.exp(-0.5 * (u / sigma) ** 2)
     s1 = jnp.einsum("nt,nkt->nk", f, -u / sigma**2 * g)  # s′(p + δ), up to a constant
     w = valid.astype(dtype)
+    if precision is not None:
+        w = w * precision  # per-column weights of the along-path average (`second_pass`)
     if sigma_along > 0:
         r = int(math.ceil(3 * sigma_along))
         kern = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma_along) ** 2)
@@ -160,6 +167,12 @@ BLEND = 0.5
 #: Average the profile fit's centres along the path as offsets from the first pass's path,
 #: not as positions (`second_pass`, "Offsets, not positions").
 FIT_RELATIVE = True
+#: Weight each column's derivative in the along-path average of `refine_centres` by the
+#: profile fit's predicted precision (`_precision`; `second_pass`, "Precision weights").
+PRECISION_WEIGHTS = False
+#: Power of the relative precision used as the weight, and its cap (× the path's median).
+PRECISION_POWER = 0.5
+PRECISION_CAP = 10.0
 
 
 @functools.partial(jax.jit, static_argnames=("sigma", "axis"))
@@ -255,6 +268,38 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     0.032 / 0.146, V gross 0.070 %); running the whole second pass twice around its own
     output (0.030 / 0.132, 0.032 / 0.147, H gross 0.035 %, +≈ 20 ms).
 
+    Precision weights (`PRECISION_WEIGHTS`, off; issue 11, printed targets). Where the
+    printed target's error comes from (development frames, seeds 7116–7117, 4 frames, errors
+    against the true path; reflectance from the noise-free rendering): 77 % of the centres
+    above the p95 lie over black squares (laser light 7.5 % of the white's; H / V pixel
+    median 0.046 / 0.045 against 0.031 / 0.031 on white), and most of them more than 6 px
+    from a reflectance edge; centres within 1 px of an edge are 14 / 11 % of the centres
+    and 24 / 1 % of those above the p95. So the printed error is the faint stripe's noise on
+    black, not the division at the edges: `refine_centres` averages the columns' derivatives
+    along the path with equal weights, and the regularised division (`REFLECTANCE_FLOOR`)
+    lifts the black columns' noise with their signal. With the weights each column's
+    derivative counts by (1 / sd²)^`PRECISION_POWER` (`_precision`: sd the profile fit's
+    predicted std, × √χ²; columns with more than `FIT_MAX_CLIPPED` clipped pixels near the
+    path weigh as the median). Development frames (seeds 7100–7117, 2 frames × 18 conditions,
+    H / V median / p95 mm): 0.0300 / 0.135, 0.0313 / 0.144 → 0.0292 / 0.132, 0.0301 / 0.146
+    (printed 0.038 / 0.171, 0.043 / 0.186 → 0.027 / 0.151, 0.027 / 0.210; clean V p95
+    0.124 → 0.126; the other conditions within ±0.001 mm median, p95 within ±0.003), gross
+    0.022 / 0.064 → 0.000 / 0.064 %, detection unchanged; flat wall (seeds 41–46)
+    identical. Power 1: 0.0293 / 0.132, 0.0301 / 0.145 (printed 0.029 / 0.157, 0.028 /
+    0.206). The pooled vertical p95 gets worse (printed V: per frame 0.258 / 0.240 / 0.065 /
+    0.097 → 0.237 / 0.245 / 0.091 / 0.101 mm, the straight frames' medians 0.013 / 0.044 →
+    0.020 / 0.010), so the weights stay off. Tried on the printed frames (seeds 7116–7117,
+    H / V median / p95 mm, unweighted 0.038 / 0.171, 0.043 / 0.186): weights on every
+    column, clipped ones included (power 1): all conditions 0.0328 / 0.142, 0.0330 / 0.156
+    (the clipped columns' fits see only the flanks: saturated H median 0.023 → 0.034); each
+    column's derivative scaled to unit amplitude as well: 0.029 / 0.163, 0.028 / 0.218; the
+    scaling alone 0.054 / 0.283, 0.053 / 0.237; with the scaling, the weights also in the
+    fit's along-path average: 0.028 / 0.153, 0.028 / 0.212, and smoothed along the path (σ 3
+    / 8 px):
+    0.033 / 0.191, 0.047 / 0.218 and 0.044 / 0.255, 0.051 / 0.228 (the gain is per column,
+    not per square); without the χ² factor 0.031 / 0.169, 0.024 / 0.203; cap 4: 0.028 /
+    0.159, 0.030 / 0.213; power 1.5: 0.033 / 0.166, 0.029 / 0.204.
+
     Where the error is left (after the above; development frames, regions by the true
     path: caps > 0.3 px off a robust quadratic, toes within 10 centres of a bend, ±12
     centres about the other stripe, 12 at the ends), H / V: plates (with or without a
@@ -290,10 +335,17 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     within 0.001 mm).
     """
     use = valid & ~bridged
+    half = int(math.ceil(REACH + 4 * sigma))
+    excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
+    fitted = fit_centres(mono, pos, use, excl, noise_std(mono), half=half, axis=axis, reach=REACH)
+    unclipped = _clipped_near(excl, pos, sigma=sigma, axis=axis) <= FIT_MAX_CLIPPED
+    prec = _precision(fitted, use, unclipped) if PRECISION_WEIGHTS else None
     # refine_centres keeps `pos` wherever `use` is False or nothing was found
-    new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis)
+    new, _ = refine_centres(
+        mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis, precision=prec
+    )
     if PROFILE_FIT:
-        new = _fitted(mono, pos, use, new, clipped, sigma=sigma, axis=axis)
+        new = _fitted(mono, pos, use, new, clipped, fitted, sigma=sigma, axis=axis)
     scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
     smoothed, _ = smooth_path(
         jnp.nan_to_num(new),
@@ -307,24 +359,50 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     return jnp.where(use, smoothed, pos)
 
 
-def _fitted(mono, pos, use, derivative, clipped, *, sigma: float, axis: int):
-    """The profile fit's centres averaged along the path (`SIGMA_REFINE`), where the fit
-    holds (`FIT_CHI2`, `FIT_SHARE`, `FIT_BORDER`, `FIT_MAX_CLIPPED`); their mean with
-    `derivative` (the centres of `refine_centres`, weights `BLEND`) where it holds with up
-    to `BLEND_MAX_CLIPPED` clipped pixels; `derivative` elsewhere. See `second_pass`."""
-    half = int(math.ceil(REACH + 4 * sigma))
-    excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
-    fit, found, _, chi2 = fit_centres(
-        mono, pos, use, excl, noise_std(mono), half=half, axis=axis, reach=REACH
-    )
-    dtype = derivative.dtype
-    # A clipped core leaves only the flanks, whose fit trades the width against the height
-    # and follows the tails' shape: there the derivative's centre (on the filled core) stays.
+def _clipped_near(excl, pos, *, sigma: float, axis: int):
+    """Clipped pixels within REACH + 2σ of the path, per centre."""
     x = excl.T if axis == 0 else excl
     near = int(math.ceil(REACH + 2 * sigma))
     rows = jnp.round(jnp.nan_to_num(pos)).astype(jnp.int32)[:, None] + jnp.arange(-near, near + 1)
     rows = jnp.clip(rows, 0, x.shape[1] - 1)
-    n_clipped = jnp.sum(jnp.take_along_axis(x, rows, 1), axis=1)
+    return jnp.sum(jnp.take_along_axis(x, rows, 1), axis=1)
+
+
+def _precision(fitted, use, unclipped):
+    """Per column, the weight of its derivative in the along-path average
+    (`PRECISION_WEIGHTS`): (1 / sd²)^`PRECISION_POWER`, sd the profile fit's predicted std of
+    the centre (× √χ² where the fit is worse than its noise model), relative to the median
+    over the path's unclipped columns and capped at `PRECISION_CAP`. Unclipped columns
+    without a fit get the smallest weight of those with one; columns with more than
+    `FIT_MAX_CLIPPED` clipped pixels near the path (whose fit sees only the flanks) get the
+    median's, 1."""
+    _, found, sd, chi2 = fitted
+    var = jnp.where(found, sd**2 * jnp.maximum(chi2, 1.0), jnp.inf)
+    prec = jnp.where(found & jnp.isfinite(var), 1.0 / jnp.maximum(var, 1e-12), 0.0)
+    ok = use & (prec > 0) & unclipped
+    ref = jnp.nanmedian(jnp.where(ok, prec, jnp.nan))
+    prec = jnp.where(ok, prec / jnp.where(jnp.isfinite(ref), ref, 1.0), 0.0)
+    low = jnp.min(jnp.where(ok, prec, jnp.inf))
+    prec = jnp.where(ok, prec, jnp.where(unclipped & jnp.isfinite(low), low, 1.0))
+    return jnp.minimum(prec, PRECISION_CAP) ** PRECISION_POWER
+
+
+def _fitted(mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, axis: int):
+    """The profile fit's centres averaged along the path (`SIGMA_REFINE`), where the fit
+    holds (`FIT_CHI2`, `FIT_SHARE`, `FIT_BORDER`, `FIT_MAX_CLIPPED`); their mean with
+    `derivative` (the centres of `refine_centres`, weights `BLEND`) where it holds with up
+    to `BLEND_MAX_CLIPPED` clipped pixels; `derivative` elsewhere. See `second_pass`."""
+    excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
+    if fitted is None:
+        half = int(math.ceil(REACH + 4 * sigma))
+        fitted = fit_centres(
+            mono, pos, use, excl, noise_std(mono), half=half, axis=axis, reach=REACH
+        )
+    fit, found, _, chi2 = fitted
+    dtype = derivative.dtype
+    # A clipped core leaves only the flanks, whose fit trades the width against the height
+    # and follows the tails' shape: there the derivative's centre (on the filled core) stays.
+    n_clipped = _clipped_near(excl, pos, sigma=sigma, axis=axis)
     if FIT_RELATIVE:
         # average the fitted offsets from the path, not the positions (see FIT_RELATIVE)
         base = jnp.nan_to_num(pos)
