@@ -26,6 +26,20 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   runs of 7301–7302 (default: offset mean 0.160, max 0.511 mm, heading 0.423° averaged over
   the runs), a confidence factor for a bead toe without profile points 0.158 / 0.488 /
   0.451°, the Kalman width tolerance 0.2 → 0.1 0.150 / 0.504 / 0.428°: no clear gain.
+- the flank gaps in sun are not a dim stripe under the threshold (7305 beside sunny, frame 7,
+  columns 312–328): the red channel clips over 8–14 rows there, and the clipped-core fill
+  (one flat level, 1.5 × the brighter edge) leaves a plateau of R − G with no ridge in its
+  middle; the detector's response is 0.01–0.09 of the frame's strongest, at the plateau's
+  edges. Over the 12 sunny dev runs (7301, 7302, 7305, 1201–1203; offset mean / max mm,
+  heading mean °, averaged over the runs: 0.218 / 0.948 / 0.520), a lower relative
+  threshold within ±3–6 px of the previous frame's centres was worse (0.03 within ±3 px:
+  0.240 / 1.058 / 0.521; 0.05: 0.244 / 0.824 / 0.601). A parabolic fill of the clipped run
+  (its middle 2 × the edge level) on frames with mean grey ≥ 120 gave 0.146 / 0.513 / 0.429
+  (worst offset 3.09 → 0.83 mm, the 36 other runs identical) but 2 false T frames and one
+  T recall of 93.8 %; on every frame it made glare worse in 5 of 5 runs (T recall down to
+  82.8 %: glints become ridges). Not adopted: the brightness gate (mean grey 120 between
+  these renders' glare ≤ 111 and sun ≥ 135) is a property of this renderer's exposure, not
+  of a rig; a gate that tells a stripe's clipped core from a glint is the open step.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

@@ -38,8 +38,8 @@ filter over s = (e, θ):
   `trend_after` (4) rejected centres lying on a straight line in time (each within
   `consistent_mm` of it: a steady drift that the lagging prediction keeps rejecting, such as
   faster lateral motion than the filter expects, or a turn seen without odometry) restart it
-  at the line's latest value. A run of rejections that agree in neither way (clutter)
-  restarts it only after `give_up_after` frames.
+  at the line's latest value, on frames without odometry only. A run of rejections that
+  agree in neither way (clutter) restarts it only after `give_up_after` frames.
   Where the rejected centres, carried by odometry, lie on a line whose direction
   contradicts the current heading (re-acquiring the crossing weld during the turn at a T,
   while the heading is still the old weld's, ≈ 90° off) the restart takes the line's
@@ -462,7 +462,7 @@ class Tracker:
         obs = Observation(frame=index, t=self._t)
         d, delta = self._motion(dt, odometry)
         if index > 0:
-            self.filter.predict(d, delta)
+            self.filter.predict(d, delta, odometry=odometry is not None)
             self._path.move(d, delta)
             self._junctions.move(d, delta)
         try:

@@ -158,7 +158,7 @@ def test_gate_does_not_restart_on_disagreeing_clutter():
     assert kf.update(150.0, 30.0, 0.8) and kf.restarts == 1  # gives up: restarts anyway
 
 
-def _drift(config: KalmanConfig, rate: float = 1.2, seed: int = 9):
+def _drift(config: KalmanConfig, rate: float = 1.2, seed: int = 9, odometry: bool = False):
     """A filter settled on a weld at y = 0, then the weld seen drifting sideways at `rate` mm
     per frame (faster lateral motion than the filter's random walk expects, no odometry of
     it). Returns the filter and, per drifting frame, (accepted, |estimate − truth|)."""
@@ -169,7 +169,7 @@ def _drift(config: KalmanConfig, rate: float = 1.2, seed: int = 9):
         kf.update(150.0, rng.normal(0, 0.1), 0.8)
     rows = []
     for k in range(1, 25):
-        kf.predict(1.5, 0.0)
+        kf.predict(1.5, 0.0, odometry=odometry)
         truth = rate * k
         ok = kf.update(150.0, truth + rng.normal(0, 0.1), 0.8)
         rows.append((ok, abs(kf.x[0] - truth)))
@@ -190,6 +190,17 @@ def test_gate_reacquires_a_steady_drift():
     old, old_rows = _drift(KalmanConfig(trend_after=0))
     assert not any(ok for ok, _ in old_rows[first : first + c.give_up_after - 1])
     assert max(err for _, err in old_rows) > max(err for _, err in rows) + 2.0
+
+
+def test_trend_restart_is_off_with_odometry():
+    """With the motion measured, the same drift restarts the filter only as the gate did
+    without the trend restart (`KalmanConfig.trend_after`: it cost the closed loop)."""
+    kf, rows = _drift(KalmanConfig(), odometry=True)
+    old, old_rows = _drift(KalmanConfig(trend_after=0), odometry=True)
+    assert [ok for ok, _ in rows] == [ok for ok, _ in old_rows]
+    assert kf.restarts == old.restarts
+    _, blind = _drift(KalmanConfig())
+    assert [ok for ok, _ in rows] != [ok for ok, _ in blind]
 
 
 def _turn_onto_bar(config: KalmanConfig, seed: int = 6):
