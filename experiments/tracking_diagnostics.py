@@ -39,7 +39,12 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   T recall of 93.8 %; on every frame it made glare worse in 5 of 5 runs (T recall down to
   82.8 %: glints become ridges). Not adopted: the brightness gate (mean grey 120 between
   these renders' glare ≤ 111 and sun ≥ 135) is a property of this renderer's exposure, not
-  of a rig; a gate that tells a stripe's clipped core from a glint is the open step.
+  of a rig; a gate that tells a stripe's clipped core from a glint is the open step. Over
+  all 48 dev runs, without a brightness gate, doming only runs longer than Steger's bar
+  limit √3·σ (3 px at σ 2): dome 0.25 / 1, sunny offset mean 0.218 → 0.185 / 0.164 mm and
+  worst 3.09 → 1.70 / 1.19 mm, shadow 0.143 → 0.138 / 0.131 mm, clean within 0.002 mm,
+  but glare 0.101 → 0.117 / 0.139 mm and false T frames over the 48 runs 1 → 11 / 18 (T
+  recall minimum 93.1 → 82.8 %), heading goal misses 11 → 13 / 14.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
