@@ -335,11 +335,16 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     within 0.001 mm).
     """
     use = valid & ~bridged
-    half = int(math.ceil(REACH + 4 * sigma))
-    excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
-    fitted = fit_centres(mono, pos, use, excl, noise_std(mono), half=half, axis=axis, reach=REACH)
-    unclipped = _clipped_near(excl, pos, sigma=sigma, axis=axis) <= FIT_MAX_CLIPPED
-    prec = _precision(fitted, use, unclipped) if PRECISION_WEIGHTS else None
+    fitted, prec = None, None
+    if PROFILE_FIT or PRECISION_WEIGHTS:  # one profile fit for both
+        half = int(math.ceil(REACH + 4 * sigma))
+        excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
+        fitted = fit_centres(
+            mono, pos, use, excl, noise_std(mono), half=half, axis=axis, reach=REACH
+        )
+    if PRECISION_WEIGHTS:
+        unclipped = _clipped_near(excl, pos, sigma=sigma, axis=axis) <= FIT_MAX_CLIPPED
+        prec = _precision(fitted, use, unclipped)
     # refine_centres keeps `pos` wherever `use` is False or nothing was found
     new, _ = refine_centres(
         mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis, precision=prec
