@@ -137,6 +137,22 @@ class PipelineConfig(eqx.Module):
         full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
         centres 0.05–0.15 px off the ground truth where "ridge" and Steger on the colour
         image stay within 0.05 px.
+    clip_dome / clip_dome_axes / clip_dome_min_run / clip_dome_white / clip_dome_colour /
+        clip_dome_along: the domed clipped-core fill (issue 12; opt-in, 0 = the flat fill).
+        A clipped run longer than ``clip_dome_min_run`` px (`DOME_MIN_RUN`, √3·σ, when 0)
+        along the fill axes in ``clip_dome_axes`` (1: down the columns, the horizontal
+        stripe's image; 2: along the rows; 3: both) gets a parabola over the flat level,
+        1 + ``clip_dome`` at its middle, unless more than ``clip_dome_white`` of its pixels
+        are odd: clipped in a channel that is not the laser's (`white_mask`, when
+        ``clip_dome_colour``) or, with ``clip_dome_along`` > 0, without a clipped pixel that
+        many px to either side across the fill axis (a compact blob, not a core elongated
+        along the stripe). Not the default: over the 48 dev T approaches it helped sun and
+        shadow but made glare worse in every setting tried (experiments/
+        tracking_diagnostics.py's docstring; e.g. 1 / axes 1 / min run 7 / white 0.5: sunny
+        offset mean 0.218 → 0.125 mm, max worst 3.09 → 1.51 mm, heading 0.520 → 0.328°;
+        glare 0.101 → 0.116 mm, max worst 1.10 → 1.50 mm, heading 0.301 → 0.346°). On the
+        tracker's first pass (every ``first_pass_stride``-th column) ``clip_dome_along``
+        counts strided columns.
     band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
         convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
         `fill_clipped`; equal to the bands of the converted frame). False converts the
@@ -176,6 +192,12 @@ class PipelineConfig(eqx.Module):
     roi_symmetric: bool = eqx.field(static=True, default=True)
     med_delay: str = eqx.field(static=True, default="ridge")
     fill_clipped: bool = eqx.field(static=True, default=True)
+    clip_dome: float = eqx.field(static=True, default=0.0)
+    clip_dome_white: float = eqx.field(static=True, default=0.0)
+    clip_dome_axes: int = eqx.field(static=True, default=3)
+    clip_dome_min_run: int = eqx.field(static=True, default=0)
+    clip_dome_colour: int = eqx.field(static=True, default=1)
+    clip_dome_along: int = eqx.field(static=True, default=0)
     band_first: bool = eqx.field(static=True, default=True)
     first_pass_stride: int = eqx.field(static=True, default=4)
     stats_stride: int = eqx.field(static=True, default=4)
@@ -371,14 +393,15 @@ def _cold_rgb(rgb, state: PipelineState, config: PipelineConfig, dtype):
     along its own search axis; the whole frame is converted only when the bands fail."""
     shape = rgb.shape[:2]
     k, w, fill = config.first_pass_stride, config.weights, config.fill_clipped
-    full = lambda: _full(frame_input(rgb, w, dtype, fill), state, config)  # noqa: E731
+    dome = _dome(config)
+    full = lambda: _full(frame_input(rgb, w, dtype, fill, dome), state, config)  # noqa: E731
     if not config.first_pass:
         return full()
     zero = jnp.zeros((), jnp.int32)
-    cols = band_image(rgb[:, ::k], zero, shape[0], 0, w, dtype, fill)
-    rows = band_image(rgb[::k], zero, shape[1], 1, w, dtype, fill)
+    cols = band_image(rgb[:, ::k], zero, shape[0], 0, w, dtype, fill, dome)
+    rows = band_image(rgb[::k], zero, shape[1], 1, w, dtype, fill, dome)
     banded, fits = _first_pass(first_peak(cols, 0), first_peak(rows, 1), shape, state, config)
-    cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped)
+    cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped, dome)
     return lax.cond(fits, lambda: _bands(cut, shape, banded, config, config.max_steps), full)
 
 
@@ -461,26 +484,42 @@ def _frame_config(config: PipelineConfig, height: int, width: int) -> PipelineCo
     return dataclasses.replace(config, sigma=config.sigma * factor) if factor > 1 else config
 
 
+def _dome(config: PipelineConfig) -> tuple:
+    """The clipped-core fill's dome (`cslx.runtime.band_input._fill`): () for the flat fill."""
+    d, axes = config.clip_dome, config.clip_dome_axes
+    if d <= 0:
+        return ()
+    heights = (d if axes & 1 else 0.0, d if axes & 2 else 0.0)
+    return (
+        *heights,
+        config.clip_dome_white,
+        config.clip_dome_min_run,
+        config.clip_dome_colour,
+        config.clip_dome_along,
+    )
+
+
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     config = _frame_config(config, height, width)
     dtype = state.filter_h.dtype
+    dome = _dome(config)
     if roi and config.roi_enabled(height, width) and config.band_first:
-        cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped)
+        cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped, dome)
         ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,
             lambda: _bands(cut, (height, width), state, config),
             lambda: _cold_rgb(rgb, state, config, dtype),
         )
     elif roi and config.roi_enabled(height, width):
-        I = frame_input(rgb, config.weights, dtype, config.fill_clipped)
+        I = frame_input(rgb, config.weights, dtype, config.fill_clipped, dome)
         ch, cv, steps, kurt, new, used_roi = lax.cond(
             state.tracking,
             lambda: _bands(image_cutter(I), (height, width), state, config),
             lambda: _cold(I, state, config),
         )
     else:
-        I = frame_input(rgb, config.weights, dtype, config.fill_clipped)
+        I = frame_input(rgb, config.weights, dtype, config.fill_clipped, dome)
         ch, cv, steps, kurt, new, used_roi = _full(I, state, config)
     new = _next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
