@@ -75,17 +75,26 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   ≤ 0.5 with dome 0.25 / 0.5: sunny 0.166 / 0.658 / 1.77 / 0.451 and
   0.138 / 0.643 / 1.72 / 0.372, glare 0.109 / 0.484 / 1.27 / 0.311 and
   0.116 / 0.501 / 1.37 / 0.335; dome 0.5, runs > 5 px, both gates: sunny
-  0.191 / 0.769 / 1.94 / 0.450, glare 0.125 / 0.504 / 1.36 / 0.387. Clean: offset mean
+  0.191 / 0.769 / 1.94 / 0.450, glare 0.125 / 0.504 / 1.36 / 0.387; dome 1, white share
+  ≤ 0.5, runs > 9 px: sunny 0.172 / 0.675 / 1.51 / 0.468, glare 0.105 / 0.475 / 1.40 /
+  0.318, shadow 0.131 / 0.533 / 1.16 / 0.481 (with the geometry gate: sunny
+  0.192 / 0.683 / 1.42 / 0.578, glare 0.108 / 0.522 / 1.40 / 0.326). Clean: offset mean
   within 0.001 mm and heading within 0.003° of the default in all; an estimate on 100 % of
-  the frames of every run in all but the last (97.9 % in one sunny run, as the default).
+  the frames of every run in all but dome 0.5 / runs > 5 px (97.9 % in one sunny run, as
+  the default).
   Not adopted: every variant helps sun (and most help shadow) but makes glare worse
-  (offset mean + 0.008 to + 0.025 mm, worst max up to 1.5 mm). The gated dome admits only
-  0–3 runs a glare frame (1201 flank and 7305 beside glare, runs > 7 px: mostly where the
-  two stripes cross and both lasers clip the horizontal core over 8–9 rows), yet the bead
+  (offset mean + 0.004 to + 0.025 mm, worst max 1.10 → 1.26–1.50 mm, 7305 flank glare).
+  Not glints: with the white-share gate alone the dome changes 300–600 px of a glare
+  frame's horizontal-stripe image (1201 flank glare frames 0, 1, 5, 8, 46; 7305 beside
+  glare 0, 10, 20), most of them the vertical stripe's core segments (columns 455–500); the
+  geometry gate leaves 8–38 px (1201 frames 0, 1, 5, 8), all on the horizontal stripe's own
+  core (runs of 8–10 rows, e.g. columns 422–456 on the bead in the flank placement, and
+  at the crossing), and glare stays as worse (0.116 mm both). So in glare the dome moves true stripe cores: the bead
   measurement of 1201 flank glare moves by 0.1–0.5 mm on most frames (offset mean
-  0.168 → 0.234 mm) while its count of horizontal centres changes by ≤ 3 a frame, so it is
-  not Steger's relative threshold dropping centres; the open step is why (the crossing's
-  run, which the flank placement puts on the bead, is the first suspect).
+  0.168 → 0.234 mm) while its count of horizontal centres changes by ≤ 3 a frame (not
+  Steger's relative threshold dropping centres). The open step is a dome that is right for
+  a glare-lit core (the clipped run's middle need not be the stripe's centre when glare
+  adds a slope across it), not a better glint gate.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
