@@ -78,7 +78,12 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   0.191 / 0.769 / 1.94 / 0.450, glare 0.125 / 0.504 / 1.36 / 0.387; dome 1, white share
   ≤ 0.5, runs > 9 px: sunny 0.172 / 0.675 / 1.51 / 0.468, glare 0.105 / 0.475 / 1.40 /
   0.318, shadow 0.131 / 0.533 / 1.16 / 0.481 (with the geometry gate: sunny
-  0.192 / 0.683 / 1.42 / 0.578, glare 0.108 / 0.522 / 1.40 / 0.326). Clean: offset mean
+  0.192 / 0.683 / 1.42 / 0.578, glare 0.108 / 0.522 / 1.40 / 0.326); runs > 7 px, white
+  share ≤ 0.5, domed only where the smaller flank is ≥ 0.7 / 0.85 of the larger (no slope
+  across the run; tried and dropped from the code): sunny 0.181 / 0.681 / 1.35 / 0.445 and
+  0.180 / 0.652 / 1.33 / 0.516, glare 0.109 / 0.516 / 1.39 / 0.331 and
+  0.105 / 0.518 / 1.11 / 0.315, shadow 0.136 / 0.644 / 1.70 / 0.520 and
+  0.143 / 0.645 / 1.70 / 0.547. Clean: offset mean
   within 0.001 mm and heading within 0.003° of the default in all; an estimate on 100 % of
   the frames of every run in all but dome 0.5 / runs > 5 px (97.9 % in one sunny run, as
   the default).
