@@ -86,7 +86,7 @@ def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array
         ok = jnp.sum((key <= mid).astype(jnp.int32)) > rank
         return jnp.where(ok, lo, mid + 1), jnp.where(ok, mid, hi)
 
-    _, low = lax.fori_loop(0, 32, step, (jnp.uint32(0), top), unroll=True)
+    _, low = lax.fori_loop(0, 32, step, (jnp.uint32(0), top))
     # rank k // 2: the same key if it is repeated there, else the least key above it
     repeated = jnp.sum((key <= low).astype(jnp.int32)) > k // 2
     high = jnp.where(repeated, low, jnp.min(jnp.where(key > low, key, top)))
