@@ -375,14 +375,20 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
       fit (−0.011) and in the final centres (−0.013); the horizontal's −0.005 / −0.005 /
       +0.001, −0.004, +0.003. Shifting the vertical centres by +0.01 px would take its
       median 0.0317 → 0.0273 mm (18 frames) — more than anything above — but an offset fitted
-      to the renderer is not a method. On noise-free renderings (no speckle, noise, texture
-      or ambient; PSF 0.6 or 0 px; 1 or 3 × 3 rays per pixel; seeds 7100 / 7102 / 7104
-      straight) every estimator (a 3-point log-parabola, a centroid, the derivative at σ
-      1.5–3.5) puts the vertical stripe 0.004–0.006 px left of the truth (horizontal
-      0.001–0.002), while the rendered plane function's zero crossing lies within 4·10⁻⁵ px
-      of it: the rendered irradiance profile, not the geometry, is off centre (candidates:
-      the 1/r, incidence and fan factors across the sheet); the other ≈ −0.008 px of the
-      noisy frames is not explained. Open.
+      to the renderer is not a method. It comes with the speckle: the straight clean scenes of
+      seeds 7100 / 7102 / 7104 / 7106 (frame 0) rendered again with parts of the image
+      formation off, the linked detector's vertical median signed error is, as rendered,
+      −0.016 / −0.015 / −0.017 / −0.012 px; without speckle −0.004 / −0.005 / +0.003 /
+      +0.002; without shot and read noise −0.022 / −0.020 / −0.033 / +0.003; with neither
+      −0.004 / −0.001 / +0.002 / −0.003; with speckle grain 2.4 px −0.016 / −0.030 / −0.010
+      / −0.032 (horizontal: ±0.004 without speckle, −0.032 to +0.018 with it, no common
+      sign). Without speckle, noise, texture and ambient light, every estimator on the red
+      channel (a 3-point log-parabola, a centroid, the derivative at σ 1.5–3.5) puts the
+      vertical stripe 0.004–0.006 px left of the truth (horizontal 0.001–0.002), while the
+      rendered plane function's zero crossing lies within 4·10⁻⁵ px of it: the profile is
+      slightly skewed, and the multiplicative speckle turns that into the larger bias (a
+      second-order effect of the estimators under multiplicative noise, presumably). Open:
+      an estimator unbiased under multiplicative noise of a skewed profile.
     """
     use = valid & ~bridged
     fitted, prec = None, None
