@@ -345,11 +345,11 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
       derivative's error (no along-path average) has RMS 0.16–0.53 px, and its 201-centre
       running mean still 0.013–0.068 px (white noise would leave 0.27 / √201 = 0.019); the
       final centres' RMS is 0.018–0.091 px, of which a 15-centre running mean keeps 75–100 %
-      (median 90 %) and a 61-centre one 43–95 % (median 69 %). It varies over tens to hundreds of centres, where the
-      speckle (grain 1.2 px) is long averaged out, so a longer or more anisotropic average
-      along the stripe has little left to remove (`SIGMA_REFINE` 5 / 8 above). It correlates
-      (+0.1 to +0.77 per frame) with the first pass's own high-frequency error p − G₆∗p,
-      because both measure the same image.
+      (median 90 %) and a 61-centre one 43–95 % (median 69 %). It varies over tens to
+      hundreds of centres, where the speckle (grain 1.2 px) is long averaged out, so a
+      longer or more anisotropic average along the stripe has little left to remove
+      (`SIGMA_REFINE` 5 / 8 above). It correlates (+0.1 to +0.77 per frame) with the first
+      pass's own high-frequency error p − G₆∗p, because both measure the same image.
     - Re-measuring around a smoothed first-pass path (so the offsets carry none of its
       high-frequency error): Gaussian σ 6: 0.0301 / 0.132, 0.0315 / 0.145; local quadratic σ
       12 / 20: 0.0301 / 0.133, 0.0311 / 0.142 and 0.0303 / 0.135, 0.0313 / 0.145, but the
