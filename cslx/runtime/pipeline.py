@@ -46,7 +46,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
-from ..segmentation.med import default_filter_length, initial_filter, med
+from ..segmentation.med import default_filter_length, initial_filter, med, med_apply
 from ..segmentation.med_bands import band_snr_scale, first_peak
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
@@ -117,6 +117,13 @@ class PipelineConfig(eqx.Module):
         (printed h 1.14 → 1.19 mm). The band filters always start flat: started from the
         impulse the 16-tap linear-phase band filters converged elsewhere (saturated h
         median 0.08 → 29 mm, clean 0.119 → 0.148 mm).
+    med_stride: on the full frame, MED's filter is found on every k-th column (row) and
+        then applied to all of them (`cslx.segmentation.med.med_apply`): one filter serves
+        the whole frame, and 320 / 240 segments pin it down as well as 640 / 480 (issue 13,
+        `experiments.med_start --pipeline --full-frame`, dev seeds 7100–7113, 2 frames of
+        each red-laser condition: k = 2 / 3 against 1, every condition within ±0.007 mm
+        median and ±0.025 mm p95, cold full frame 70.4 → 60.0 / 56.2 ms at load 4). 2 is the
+        default; the bands (64 / 128 samples a segment) use every segment.
     sigma: Steger scale, px, for frames up to 480 px; larger frames scale it by
         min(H, W) / 480 (`_frame_config`). Rig audit, 1280×720 at twice the focal length
         (clean T scenes, dev seeds 8804–8805, cold frames): σ 2 gave 36–91 gross (> 1 mm)
@@ -191,6 +198,7 @@ class PipelineConfig(eqx.Module):
     smooth_half: int = eqx.field(static=True, default=3)
     use_med: bool = eqx.field(static=True, default=True)
     start: str = eqx.field(static=True, default="impulse")
+    med_stride: int = eqx.field(static=True, default=2)
     roi_med: bool = eqx.field(static=True, default=True)
     roi_symmetric: bool = eqx.field(static=True, default=True)
     med_delay: str = eqx.field(static=True, default="ridge")
@@ -280,11 +288,17 @@ def init_state(
     )
 
 
-def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med, symmetric=False, size=0):
-    """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis)."""
+def _stripe(
+    I, W0, axis, L, config: PipelineConfig, max_steps, use_med, symmetric=False, size=0, stride=1
+):
+    """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis).
+
+    ``stride`` > 1: the filter is found on every stride-th segment and applied to all.
+    """
     if use_med:
+        sub = I if stride == 1 else (I[:, ::stride] if axis == 0 else I[::stride])
         r = med(
-            I,
+            sub,
             axis=axis,
             L=L,
             init=W0,
@@ -297,7 +311,14 @@ def _stripe(I, W0, axis, L, config: PipelineConfig, max_steps, use_med, symmetri
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
-        B = lax.cond(ok, lambda: r.output, lambda: I)  # not a select (band_input's notes)
+
+        def out():
+            if stride == 1:
+                return r.output
+            kind = "centre" if symmetric else config.med_delay
+            return med_apply(I, r.filter, axis=axis, delay=kind, ridge_sigma=config.sigma)[0]
+
+        B = lax.cond(ok, out, lambda: I)  # not a select (band_input's notes)
         steps, kurt = r.steps.astype(jnp.int32), jnp.where(ok, r.kurtosis, jnp.nan)
     else:
         W, B, steps, kurt = W0, I, jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan, I.dtype)
@@ -316,8 +337,9 @@ def _full(I, state: PipelineState, config: PipelineConfig):
     height, width = I_h.shape
     L_h, L_v = config.lengths(height, width)
     steps = config.max_steps
-    ch, Wh, sh, kh = _stripe(I_h, state.filter_h, 0, L_h, config, steps, config.use_med)
-    cv, Wv, sv, kv = _stripe(I_v, state.filter_v, 1, L_v, config, steps, config.use_med)
+    k = config.med_stride
+    ch, Wh, sh, kh = _stripe(I_h, state.filter_h, 0, L_h, config, steps, config.use_med, stride=k)
+    cv, Wv, sv, kv = _stripe(I_v, state.filter_v, 1, L_v, config, steps, config.use_med, stride=k)
     new = eqx.tree_at(lambda s: (s.filter_h, s.filter_v), state, (Wh, Wv))
     return ch, cv, jnp.stack([sh, sv]), jnp.stack([kh, kv]), new, jnp.zeros((), bool)
 
