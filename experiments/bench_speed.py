@@ -7,7 +7,8 @@ One function per measured figure (median wall time after warm-up, every result b
   colour → MED on both stripes → Steger → triangulation → weld features) in tracking mode
   (consecutive video frames, state carried; MED in the bands, and without it as before
   issue 13), a cold frame (bands from the first pass, MED converged there), the cold full
-  frame (flat MED, L = 240 / 320, converged), the warm full frame and the tracker's `step`;
+  frame (MED from `PipelineConfig.start`, L = 240 / 320, to `PipelineConfig.tol`), both
+  also as before (Table 2's flat start, tol 1e-4), the warm full frame and the tracker's `step`;
 - `bench_band_agreement`: band centres (first-pass bands, and tracking carried over the
   video) against full-frame MED centres and the ground truth, for linear-phase band filters
   (the default) and free ones with the ridge or the correlation-peak delay (issue 13);
@@ -43,6 +44,7 @@ Writes `results/bench_speed.csv` and `results/bench_speed.md`.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import gc
 import json
 import math
@@ -255,14 +257,19 @@ def bench_pipeline(b: Bench) -> None:
         "Tracker.step (pipeline + host transfer + Kalman)",
         timeit(lambda i: tracker.step(frames[i]), order, b.n, b.budget),
     )
-    for key, label, roi in (
-        ("cold_bands", "cold frame: bands from the first pass, MED converged there", True),
-        ("cold_full", "cold full frame (flat MED, L=240/320, converged)", False),
-    ):
+    before = dataclasses.replace(config, start="flat", tol=1e-4)
+    for key, label, roi, cfg in (
+        ("cold_bands", "cold frame: bands from the first pass, MED converged there", True, config),
+        ("cold_bands_before", "cold frame, first-pass bands, tol 1e-4 (before)", True, before),
+        ("cold_full", "cold full frame (impulse start, tol 1e-2, L=240/320)", False, config),
+        ("cold_full_before", "cold full frame, Table 2's flat start, tol 1e-4 (before)", False,
+         before),
+    ):  # fmt: skip
         steps, used = [], []
+        st0 = pipeline.init_state(cfg, sensor.camera.image_size)
 
-        def cold(i, roi=roi, steps=steps, used=used):
-            res, _ = pipeline.process_frame(sensor, config, frames[i], state0, roi=roi)
+        def cold(i, roi=roi, steps=steps, used=used, cfg=cfg, st0=st0):
+            res, _ = pipeline.process_frame(sensor, cfg, frames[i], st0, roi=roi)
             _block(res)
             steps.append(np.asarray(res.med_steps))
             used.append(bool(res.used_roi))

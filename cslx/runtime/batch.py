@@ -65,7 +65,7 @@ def process_batch(
     Args:
         sensor, config: as `process_frame`.
         frames: (F, H, W, 3) uint8 RGB frames.
-        state: the start state; default `init_state` (cold, flat MED filters).
+        state: the start state; default `init_state` (cold MED filters, `PipelineConfig.start`).
         roi: allow the bands of the first pass (`process_frame`); False processes the full
             frame.
         vmap_size: frames vectorised together (`cslx.segmentation.shard.map_frames`);

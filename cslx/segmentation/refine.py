@@ -333,6 +333,62 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
     ±6–12, β 5–20: H / V p95 0.148–0.172 / 0.157–0.174); the smoothing repeated without the
     centres more than κ × scatter from the first (κ 2: 0.031 / 0.144, 0.033 / 0.150; κ 3 / 4:
     within 0.001 mm).
+
+    What limits it now, and what did not pay (issue 11, the vertical stripe's median and
+    both p95s; development frames seeds 7100–7117, frames 0–1 (36) unless noted, H / V
+    median / p95 mm, as used: 0.0300 / 0.135, 0.0313 / 0.144; frames 0–2 (54): 0.0297 /
+    0.136, 0.0326 / 0.147; frame 0 (18): 0.0301 / 0.131, 0.0317 / 0.135. "Curved": centres
+    whose true path is > 0.3 px off its own ±15-centre line, the caps' and toes' sharpest
+    bends, 2 % of the centres).
+
+    - The error left is not speckle-grain noise. Frame 0, plates: the per-column
+      derivative's error (no along-path average) has RMS 0.16–0.53 px, and its 201-centre
+      running mean still 0.013–0.068 px (white noise would leave 0.27 / √201 = 0.019); the
+      final centres' RMS is 0.018–0.091 px, of which a 15-centre running mean keeps 75–100 %
+      (median 90 %) and a 61-centre one 43–95 % (median 69 %). It varies over tens to
+      hundreds of centres, where the speckle (grain 1.2 px) is long averaged out, so a
+      longer or more anisotropic average along the stripe has little left to remove
+      (`SIGMA_REFINE` 5 / 8 above). It correlates (+0.1 to +0.77 per frame) with the first
+      pass's own high-frequency error p − G₆∗p, because both measure the same image.
+    - Re-measuring around a smoothed first-pass path (so the offsets carry none of its
+      high-frequency error): Gaussian σ 6: 0.0301 / 0.132, 0.0315 / 0.145; local quadratic σ
+      12 / 20: 0.0301 / 0.133, 0.0311 / 0.142 and 0.0303 / 0.135, 0.0313 / 0.145, but the
+      curved centres' median 0.149 / 0.154 px → 0.166 / 0.163, 0.167 / 0.188, 0.203 / 0.229
+      (the bead's bends rounded) and sunny straight H p95 0.166 → 0.182–0.194: not kept.
+    - The derivative's σ (`sigma`, from the measured width per stripe, `robust.stripe_sigma`)
+      × 0.8 (2 px on most frames): 0.0301 / 0.133, 0.0318 / 0.138 (cross printed V 0.0756 /
+      0.248 → 0.0667 / 0.206; straight green H median 0.0388 → 0.0457, straight sunny V p95
+      0.313 → 0.332); × 1.2 (18 frames): 0.0306 / 0.139, 0.0319 / 0.140 (as used 0.0301 /
+      0.131, 0.0317 / 0.135): not kept.
+    - The fit's along-path average weighted against glints and sheen (54 frames): each
+      fitted centre by 1 / max(χ², 1): 0.0293 / 0.136, 0.0321 / 0.146 (straight clean V
+      median 0.0153 → 0.0174, sunny V p95 0.187 → 0.195 and 0.199 → 0.207, cross shadow V
+      median 0.0354 → 0.0369; curved median 0.140 → 0.142 px H: the caps gain nothing);
+      by 1 / max(χ², 1)²: 0.0298 / 0.135, 0.0306 / 0.142 on 36 frames (1 / χ²: 0.0297 /
+      0.135, 0.0306 / 0.143); by the inverse predicted variance 1 / (sd² max(χ², 1)),
+      relative to the path's median, capped at 10, power 1 / 0.5: 0.0295 / 0.137, 0.0323 /
+      0.145 and 0.0294 / 0.136, 0.0322 / 0.145. Gains ≤ 1.5 % against single conditions
+      4–14 % worse: not kept.
+    - A bias of the vertical stripe. Its signed error (mean over frame 0's 14 unsaturated
+      frames of the per-frame median, plates) is −0.013 px (11 of 14 negative) in the
+      per-column derivative at σ 1.5 / 2.5 / 3.5 (−0.016 / −0.013 / −0.012), in the profile
+      fit (−0.011) and in the final centres (−0.013); the horizontal's −0.005 / −0.005 /
+      +0.001, −0.004, +0.003. Shifting the vertical centres by +0.01 px would take its
+      median 0.0317 → 0.0273 mm (18 frames) — more than anything above — but an offset fitted
+      to the renderer is not a method. It comes with the speckle: the straight clean scenes of
+      seeds 7100 / 7102 / 7104 / 7106 (frame 0) rendered again with parts of the image
+      formation off, the linked detector's vertical median signed error is, as rendered,
+      −0.016 / −0.015 / −0.017 / −0.012 px; without speckle −0.004 / −0.005 / +0.003 /
+      +0.002; without shot and read noise −0.022 / −0.020 / −0.033 / +0.003; with neither
+      −0.004 / −0.001 / +0.002 / −0.003; with speckle grain 2.4 px −0.016 / −0.030 / −0.010
+      / −0.032 (horizontal: ±0.004 without speckle, −0.032 to +0.018 with it, no common
+      sign). Without speckle, noise, texture and ambient light, every estimator on the red
+      channel (a 3-point log-parabola, a centroid, the derivative at σ 1.5–3.5) puts the
+      vertical stripe 0.004–0.006 px left of the truth (horizontal 0.001–0.002), while the
+      rendered plane function's zero crossing lies within 4·10⁻⁵ px of it: the profile is
+      slightly skewed, and the multiplicative speckle turns that into the larger bias (a
+      second-order effect of the estimators under multiplicative noise, presumably). Open:
+      an estimator unbiased under multiplicative noise of a skewed profile.
     """
     use = valid & ~bridged
     fitted, prec = None, None

@@ -1,5 +1,7 @@
 """Per-frame pipeline: jit == eager, vmap == per frame, ROI as accurate as the full frame."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -140,3 +142,39 @@ def test_steger_sigma_scales_with_large_frames():
     assert _frame_config(config, 240, 320) is config
     big = _frame_config(config, 720, 1280)
     assert big.sigma == config.sigma * 1.5 and big.roi_half_h == config.roi_half_h
+
+
+def test_impulse_start_converges_faster_to_equally_good_centres(scene):
+    """A cold full frame from the default start (impulse, tol 1e-2) takes fewer MED steps than
+    Table 2's flat start at 1e-4, with centres as close to the truth (PipelineConfig.start)."""
+    sensor, config, frames = scene
+    img, gt = frames[0]
+    flat = dataclasses.replace(config, start="flat", tol=1e-4)
+    out = {}
+    for name, cfg in (("default", config), ("flat", flat)):
+        r, _ = process_frame(sensor, cfg, img, init_state(cfg, sensor.camera.image_size), roi=False)
+        out[name] = (np.asarray(r.med_steps), _pixel_error(r, gt))
+    steps, err = out["default"]
+    steps_flat, err_flat = out["flat"]
+    assert np.all(steps < steps_flat), (steps, steps_flat)
+    assert max(err) < 0.2 and max(err) <= max(err_flat) + 0.03, (err, err_flat)
+
+
+def test_filter_from_every_other_segment_gives_the_same_centres(scene):
+    """`PipelineConfig.med_stride`: the full-frame filter found on every 2nd column (row) and
+    applied to all gives the centres of the filter found on all of them."""
+    sensor, config, frames = scene
+    img, gt = frames[1]
+    one = dataclasses.replace(config, med_stride=1)
+    two = dataclasses.replace(config, med_stride=2)
+    r1, _ = process_frame(sensor, one, img, init_state(one, sensor.camera.image_size), roi=False)
+    r2, _ = process_frame(sensor, two, img, init_state(two, sensor.camera.image_size), roi=False)
+    for a, b in ((r1.centres_h, r2.centres_h), (r1.centres_v, r2.centres_v)):
+        both = np.asarray(a.valid & b.valid)
+        assert both.mean() > 0.9
+        d = np.abs(np.asarray(a.pos)[both] - np.asarray(b.pos)[both])
+        assert np.median(d) < 0.02 and np.percentile(d, 95) < 0.1, (
+            np.median(d),
+            np.percentile(d, 95),
+        )
+    assert max(_pixel_error(r2, gt)) < 0.2
