@@ -94,12 +94,12 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   glare 0, 10, 20), most of them the vertical stripe's core segments (columns 455–500); the
   geometry gate leaves 8–38 px (1201 frames 0, 1, 5, 8), all on the horizontal stripe's own
   core (runs of 8–10 rows, e.g. columns 422–456 on the bead in the flank placement, and
-  at the crossing), and glare stays as worse (0.116 mm both). So in glare the dome moves true stripe cores: the bead
-  measurement of 1201 flank glare moves by 0.1–0.5 mm on most frames (offset mean
-  0.168 → 0.234 mm) while its count of horizontal centres changes by ≤ 3 a frame (not
-  Steger's relative threshold dropping centres). The open step is a dome that is right for
-  a glare-lit core (the clipped run's middle need not be the stripe's centre when glare
-  adds a slope across it), not a better glint gate.
+  at the crossing), and glare stays as worse (0.116 mm both). So in glare the dome moves
+  true stripe cores: the bead measurement of 1201 flank glare moves by 0.1–0.5 mm on most
+  frames (offset mean 0.168 → 0.234 mm) while its count of horizontal centres changes by
+  ≤ 3 a frame (not Steger's relative threshold dropping centres). The open step is a dome
+  that is right for a glare-lit core (the clipped run's middle need not be the stripe's
+  centre when glare adds a slope across it), not a better glint gate.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
