@@ -100,6 +100,12 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   ≤ 3 a frame (not Steger's relative threshold dropping centres). The open step is a dome
   that is right for a glare-lit core (the clipped run's middle need not be the stripe's
   centre when glare adds a slope across it), not a better glint gate.
+- the goals, run by run (all 48 dev runs, the integrator's rerun of dome 1 / down the
+  columns / runs > 7 px / white share ≤ 0.5 against the default, one process per seed
+  block): runs missing each issue-12 goal, default → domed: offset mean 10 → 2, offset
+  max 9 → 3, heading 11 → 9, estimate ≥ 98 % 1 → 0, false T 1 → 1, T recall 0 → 0. Glare
+  is worse on average but misses no more goals, so the tracker adopted it
+  (`cslx.runtime.tracker.tracking_config`).
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

@@ -171,8 +171,10 @@ class PipelineConfig(eqx.Module):
         are odd: clipped in a channel that is not the laser's (`white_mask`, when
         ``clip_dome_colour``) or, with ``clip_dome_along`` > 0, without a clipped pixel that
         many px to either side across the fill axis (a compact blob, not a core elongated
-        along the stripe). Not the default: over the 48 dev T approaches it helped sun and
-        shadow but made glare worse in every setting tried (experiments/
+        along the stripe). Off here (the paper's pipeline); the tracker's pipeline
+        (`cslx.runtime.tracker.tracking_config`) uses 1 / axes 1 / min run 7 / white 0.5,
+        which over the 48 dev T approaches took the runs missing an issue-12 goal from 32
+        to 15. Every setting tried helped sun and shadow but made glare worse (experiments/
         tracking_diagnostics.py's docstring; e.g. 1 / axes 1 / min run 7 / white 0.5: sunny
         offset mean 0.218 → 0.125 mm, max worst 3.09 → 1.51 mm, heading 0.520 → 0.328°;
         glare 0.101 → 0.116 mm, max worst 1.10 → 1.50 mm, heading 0.301 → 0.346°). On the

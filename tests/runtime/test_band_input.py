@@ -134,3 +134,16 @@ def test_gated_dome_ridges_a_clipped_stripe_core_but_not_a_glint_or_a_blob():
     colour = DOME_GATED[:5] + (0,)
     I_c = np.asarray(frame_input(rgb, W, jnp.float32, True, colour)[0])
     assert np.ptp(I_c[8:18, 30]) == 0 and np.ptp(I_c[44:54, 11]) > 0
+
+
+def test_tracker_default_domes_a_clipped_stripe_core_and_keeps_a_glint_flat():
+    """The tracker's pipeline (`tracking_config`) uses the gated dome: the clipped core gets
+    a ridge at its middle, the white glint keeps the flat fill's level."""
+    from cslx.runtime.tracker import tracking_config
+
+    rgb = _stripe_glint_blob()
+    I_h = np.asarray(frame_input(rgb, W, jnp.float32, True, _dome(tracking_config()))[0])
+    flat = np.asarray(frame_input(rgb, W, jnp.float32, True, ())[0])
+    core = I_h[25:37, 20]
+    assert np.argmax(core) in (5, 6) and core[5] - core[0] > 0.2 * core[0]
+    np.testing.assert_array_equal(I_h[8:18, 30], flat[8:18, 30])
