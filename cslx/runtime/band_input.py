@@ -51,13 +51,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Float, UInt8
 
-from ..segmentation.robust import (
-    DOME_MIN_RUN,
-    MAX_RUN,
-    clipped_mask,
-    fill_clipped,
-    white_mask,
-)
+from ..segmentation.clipped import DOME_MIN_RUN, MAX_RUN, clipped_mask, fill_clipped, white_mask
 
 __all__ = [
     "band_image",
@@ -191,7 +185,7 @@ def frame_input(
     I = colour_sum(rgb, weights, dtype)
     if fill:
         # clipped pixels hold lower bounds: fill each short run along the stripe's search
-        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
+        # axis from its flanks (`cslx.segmentation.clipped.fill_clipped`), one image per stripe
         clip = clipped_mask(rgb)
         I = tuple(_fill(rgb, I, clip, weights, a, dome) for a in (0, 1))
     return I
