@@ -45,6 +45,67 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   worst 3.09 → 1.70 / 1.19 mm, shadow 0.143 → 0.138 / 0.131 mm, clean within 0.002 mm,
   but glare 0.101 → 0.117 / 0.139 mm and false T frames over the 48 runs 1 → 11 / 18 (T
   recall minimum 93.1 → 82.8 %), heading goal misses 11 → 13 / 14.
+- a gate that tells a stripe's clipped core from a glint (`PipelineConfig.clip_dome*`,
+  opt-in; all 48 dev runs, 12 per kind, each variant against the default in one process;
+  per kind: offset mean, max averaged over the runs, worst max (mm), heading mean (°)).
+  Default: clean 0.085 / 0.357 / 0.69 / 0.277, sunny 0.218 / 0.948 / 3.09 / 0.520
+  (estimate 97.9 % in one run), glare 0.101 / 0.498 / 1.10 / 0.301, shadow
+  0.143 / 0.606 / 1.60 / 0.478; false T 1 (7305 flank glare), T recall minimum 93.1 %.
+  What the frames show: glare's glints are white (≥ 75 % of a run's pixels with G or B
+  clipped in 88–93 % of the runs off the stripe), but the stripe's core on the sunlit bead
+  flank is partly white too (sun plus laser clip G: 7305 beside sunny frame 7, columns
+  312–330, runs of 11–15 rows with 10–50 % white pixels), so "no white pixel" refuses just
+  those runs and a share ≤ 0.5 admits them. Doming along the rows as well (the vertical
+  stripe's image, where the horizontal stripe's steep flank runs become ridges) gave false
+  T frames in sun whatever the gate (22 runs: 0 → 8 with the colour gate, 9 without; T
+  recall 96.6 → 79.3 % in 7301 flank sunny); down the columns only, false T and recall
+  stayed the default's in every variant below. Runs of 4–7 px (the stripe on the plate)
+  need no dome (one ridge already) and doming them cost glare (26 runs, min run 3: heading
+  0.270 → 0.470°). Dome 1, down the columns, runs > 7 px:
+  colour gate, no white pixel: sunny 0.171 / 0.623 / 1.49 / 0.555, glare
+  0.109 / 0.535 / 1.39 / 0.323, shadow 0.123 / 0.533 / 1.15 / 0.508; white share ≤ 0.5:
+  sunny 0.125 / 0.544 / 1.51 / 0.328, glare 0.116 / 0.517 / 1.50 / 0.346, shadow
+  0.122 / 0.537 / 1.15 / 0.480; plus the geometry gate (a clipped pixel 6 px to a side
+  across the run, so a compact blob stays flat): sunny 0.139 / 0.624 / 1.72 / 0.338, glare
+  0.116 / 0.518 / 1.50 / 0.339, shadow 0.122 / 0.526 / 1.14 / 0.486; geometry gate alone:
+  sunny 0.137 / 0.630 / 1.38 / 0.357, glare 0.114 / 0.547 / 1.26 / 0.357, shadow
+  0.110 / 0.440 / 1.16 / 0.412; no gate: sunny 0.135 / 0.601 / 1.38 / 0.370, glare
+  0.126 / 0.491 / 1.26 / 0.402, shadow 0.110 / 0.462 / 1.17 / 0.400 (runs > 10 px:
+  sunny 0.178 / 0.630 / 1.21 / 0.499, glare 0.123 / 0.492 / 1.32 / 0.414). White share
+  ≤ 0.5 with dome 0.25 / 0.5: sunny 0.166 / 0.658 / 1.77 / 0.451 and
+  0.138 / 0.643 / 1.72 / 0.372, glare 0.109 / 0.484 / 1.27 / 0.311 and
+  0.116 / 0.501 / 1.37 / 0.335; dome 0.5, runs > 5 px, both gates: sunny
+  0.191 / 0.769 / 1.94 / 0.450, glare 0.125 / 0.504 / 1.36 / 0.387; dome 1, white share
+  ≤ 0.5, runs > 9 px: sunny 0.172 / 0.675 / 1.51 / 0.468, glare 0.105 / 0.475 / 1.40 /
+  0.318, shadow 0.131 / 0.533 / 1.16 / 0.481 (with the geometry gate: sunny
+  0.192 / 0.683 / 1.42 / 0.578, glare 0.108 / 0.522 / 1.40 / 0.326); runs > 7 px, white
+  share ≤ 0.5, domed only where the smaller flank is ≥ 0.7 / 0.85 of the larger (no slope
+  across the run; tried and dropped from the code): sunny 0.181 / 0.681 / 1.35 / 0.445 and
+  0.180 / 0.652 / 1.33 / 0.516, glare 0.109 / 0.516 / 1.39 / 0.331 and
+  0.105 / 0.518 / 1.11 / 0.315, shadow 0.136 / 0.644 / 1.70 / 0.520 and
+  0.143 / 0.645 / 1.70 / 0.547. Clean: offset mean
+  within 0.001 mm and heading within 0.003° of the default in all; an estimate on 100 % of
+  the frames of every run in all but dome 0.5 / runs > 5 px (97.9 % in one sunny run, as
+  the default).
+  Not adopted: every variant helps sun (and most help shadow) but makes glare worse
+  (offset mean + 0.004 to + 0.025 mm, worst max 1.10 → 1.26–1.50 mm, 7305 flank glare).
+  Not glints: with the white-share gate alone the dome changes 300–600 px of a glare
+  frame's horizontal-stripe image (1201 flank glare frames 0, 1, 5, 8, 46; 7305 beside
+  glare 0, 10, 20), most of them the vertical stripe's core segments (columns 455–500); the
+  geometry gate leaves 8–38 px (1201 frames 0, 1, 5, 8), all on the horizontal stripe's own
+  core (runs of 8–10 rows, e.g. columns 422–456 on the bead in the flank placement, and
+  at the crossing), and glare stays as worse (0.116 mm both). So in glare the dome moves
+  true stripe cores: the bead measurement of 1201 flank glare moves by 0.1–0.5 mm on most
+  frames (offset mean 0.168 → 0.234 mm) while its count of horizontal centres changes by
+  ≤ 3 a frame (not Steger's relative threshold dropping centres). The open step is a dome
+  that is right for a glare-lit core (the clipped run's middle need not be the stripe's
+  centre when glare adds a slope across it), not a better glint gate.
+- the goals, run by run (all 48 dev runs, the integrator's rerun of dome 1 / down the
+  columns / runs > 7 px / white share ≤ 0.5 against the default, one process per seed
+  block): runs missing each issue-12 goal, default → domed: offset mean 10 → 2, offset
+  max 9 → 3, heading 11 → 9, estimate ≥ 98 % 1 → 0, false T 1 → 1, T recall 0 → 0. Glare
+  is worse on average but misses no more goals, so the tracker adopted it
+  (`cslx.runtime.tracker.tracking_config`).
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
@@ -231,6 +292,7 @@ def main() -> None:
                     s = diagnose(tracker, seq, a.worst, verbose=not a.quiet)
                     totals[name].append(s)
                     keys = (
+                        "estimate_pct",
                         "offset_mean_mm",
                         "offset_max_mm",
                         "heading_mean_deg",

@@ -51,7 +51,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Float, UInt8
 
-from ..segmentation.robust import MAX_RUN, clipped_mask, fill_clipped
+from ..segmentation.clipped import DOME_MIN_RUN, MAX_RUN, clipped_mask, fill_clipped, white_mask
 
 __all__ = [
     "band_image",
@@ -84,18 +84,51 @@ def colour_sum(rgb: UInt8[Array, "h w 3"], weights, dtype) -> Float[Array, "h w"
     return jnp.zeros(rgb.shape[:-1], dtype) if out is None else out
 
 
-def _monochrome(rgb, weights, dtype, fill: bool, axis: int):
+def _fill(rgb, I, clip, weights, axis: int, dome: tuple):
+    """`fill_clipped` of ``I`` along ``axis``. ``dome``: () for the flat fill, or (height
+    along axis 0, height along axis 1, odd share, min run, colour, along) as
+    `cslx.runtime.pipeline._dome` builds it: runs longer than min run (`DOME_MIN_RUN` when
+    0) with at most that share of odd pixels (white, `white_mask`, when ``colour``; no
+    clipped pixel ``along`` px to either side across ``axis`` when ``along`` > 0) are domed
+    to 1 + height at their middle (issue 12; opt-in)."""
+    height = float(dome[axis]) if dome else 0.0
+    if height <= 0:
+        return fill_clipped(I, clip, axis=axis)[0]
+    share, min_run = float(dome[2]), int(dome[3]) or DOME_MIN_RUN
+    colour = dome[4] if len(dome) > 4 else 1
+    white = white_mask(rgb, weights) if colour else None
+    along = int(dome[5]) if len(dome) > 5 else 0
+    return fill_clipped(
+        I,
+        clip,
+        axis=axis,
+        white=white,
+        dome=height,
+        dome_min_run=min_run,
+        dome_white_share=share,
+        dome_along=along,
+    )[0]
+
+
+def _monochrome(rgb, weights, dtype, fill: bool, axis: int, dome: tuple = ()):
     I = colour_sum(rgb, weights, dtype)
     if not fill:
         return I
     clip = clipped_mask(rgb)
     # Most frames have no clipped pixel in the band: skip the fill there (on the CPU
     # `lax.cond` runs one branch only).
-    return lax.cond(jnp.any(clip), lambda: fill_clipped(I, clip, axis=axis)[0], lambda: I)
+    return lax.cond(jnp.any(clip), lambda: _fill(rgb, I, clip, weights, axis, dome), lambda: I)
 
 
 def band_image(
-    rgb: UInt8[Array, "h w 3"], start, size: int, axis: int, weights, dtype, fill: bool = True
+    rgb: UInt8[Array, "h w 3"],
+    start,
+    size: int,
+    axis: int,
+    weights,
+    dtype,
+    fill: bool = True,
+    dome: tuple = (),
 ) -> Float[Array, "a b"]:
     """Monochrome band of ``size`` samples from ``start`` along ``axis``, clipped runs filled.
 
@@ -119,9 +152,11 @@ def band_image(
         # band once and the finished band once, rather than the colour image, the mask and
         # the fill's four flank arrays (the same values; 480×128 band 2.04 → 1.38 ms,
         # 400 interleaved calls, load 6, issue 13).
-        I = _monochrome(jnp.transpose(sub, (1, 0, 2)), weights, dtype, fill, 0)
+        # the fill along the transposed band's axis 0 is the frame's axis 1: swap the heights
+        d = (dome[1], dome[0], *dome[2:]) if dome else dome
+        I = _monochrome(jnp.transpose(sub, (1, 0, 2)), weights, dtype, fill, 0, d)
         return lax.dynamic_slice_in_dim(I, start - o0, size, axis=0).T
-    I = _monochrome(sub, weights, dtype, fill, axis)
+    I = _monochrome(sub, weights, dtype, fill, axis, dome)
     if outer == size:
         return I
     return lax.dynamic_slice_in_dim(I, start - o0, size, axis=axis)
@@ -138,15 +173,21 @@ def frame_stats(rgb: UInt8[Array, "h w 3"], dtype, stride: int = STATS_STRIDE):
     return jnp.mean(sub.astype(dtype)), jnp.mean(jnp.any(sub >= 255, axis=-1).astype(dtype))
 
 
-def frame_input(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
+def frame_input(
+    rgb: UInt8[Array, "h w 3"],
+    weights,
+    dtype,
+    fill: bool = True,
+    dome: tuple = (),
+):
     """The whole frame's monochrome input: one image, or (filled down the columns, filled
     along the rows) when ``fill`` (one image per stripe axis)."""
     I = colour_sum(rgb, weights, dtype)
     if fill:
         # clipped pixels hold lower bounds: fill each short run along the stripe's search
-        # axis from its flanks (`cslx.segmentation.robust.fill_clipped`), one image per stripe
+        # axis from its flanks (`cslx.segmentation.clipped.fill_clipped`), one image per stripe
         clip = clipped_mask(rgb)
-        I = (fill_clipped(I, clip, axis=0)[0], fill_clipped(I, clip, axis=1)[0])
+        I = tuple(_fill(rgb, I, clip, weights, a, dome) for a in (0, 1))
     return I
 
 
@@ -163,11 +204,17 @@ def image_cutter(I):
     return cut
 
 
-def rgb_cutter(rgb: UInt8[Array, "h w 3"], weights, dtype, fill: bool = True):
+def rgb_cutter(
+    rgb: UInt8[Array, "h w 3"],
+    weights,
+    dtype,
+    fill: bool = True,
+    dome: tuple = (),
+):
     """``cut(axis, start, size)``: a band cut from the RGB frame and converted (`band_image`);
     the same values as ``image_cutter(frame_input(rgb, ...))``."""
 
     def cut(axis, start, size):
-        return band_image(rgb, start, size, axis, weights, dtype, fill)
+        return band_image(rgb, start, size, axis, weights, dtype, fill, dome)
 
     return cut

@@ -236,10 +236,21 @@ def tracking_config():
     Centres in bead columns (seed 101): median 0.150 → 0.125 px (clean), 0.38 → 0.13 px (sun),
     where MED's filter moves the stripe under the bead's sheen. MED stays the default of
     `PipelineConfig` (the paper's method, Table 6).
+
+    The clipped-core fill is domed (`PipelineConfig.clip_dome*`: height 1, down the columns
+    only, runs longer than 7 px, at most half of a run's pixels white): on sunlit bead
+    flanks the red channel clips over 8–14 rows, and the flat fill left a plateau with no
+    ridge for Steger. Over the 48 dev T approaches (seeds 7301, 7302, 7305, 1201–1203;
+    `experiments/tracking_diagnostics.py`) the runs missing an issue-12 goal went, flat →
+    domed: offset mean 10 → 2, offset max 9 → 3, heading 11 → 9, estimate 1 → 0, false T
+    1 → 1, T recall 0 → 0; sunny offset mean 0.218 → 0.125 mm, shadow 0.143 → 0.122 mm,
+    glare 0.101 → 0.116 mm (worse, but within its goals in as many runs).
     """
     from .pipeline import PipelineConfig
 
-    return PipelineConfig(use_med=False)
+    return PipelineConfig(
+        use_med=False, clip_dome=1.0, clip_dome_axes=1, clip_dome_min_run=7, clip_dome_white=0.5
+    )
 
 
 def _logger(log) -> Callable[[str], None]:

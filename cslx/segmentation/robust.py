@@ -136,6 +136,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SEARCH_STRIDE, SIGMA_MAX
+from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
 from .ridges import (
@@ -156,14 +157,13 @@ __all__ = [
     "SIGMA_PER_WIDTH",
     "clipped_mask",
     "fill_clipped",
+    "white_mask",
     "linked_extract",
     "max_run_for",
     "search_space_unclipped",
     "stripe_sigma",
 ]
 
-#: Longest clipped run (px along the search axis) treated as a saturated laser core.
-MAX_RUN = 24
 #: Floor, slope and ceiling of the width-aware σ. Steger's condition is σ ≥ s (Gaussian
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
 #: 2.5 / 3.5 / 4.5 px gave median errors 0.090 / 0.084 / 0.073 mm at the same detection and
@@ -182,63 +182,6 @@ SIGMA_ALONG = 6.0
 SIGMA_MAX_HEIGHT = 480
 #: Smooth the linked path with adaptive local quadratics (`cslx.segmentation.path`).
 SMOOTH_PATH = True
-
-
-def clipped_mask(image, clip_level: float = CLIP_LEVEL):
-    """(H, W) True where any channel of an 8-bit-scaled RGB frame is at `clip_level` or above."""
-    channels = jnp.unstack(jnp.asarray(image), axis=-1)  # no reduction over the minor axis
-    return functools.reduce(jnp.maximum, channels) >= clip_level
-
-
-@functools.partial(jax.jit, static_argnames=("axis", "max_run"))
-def fill_clipped(mono, clipped, *, axis: int = 0, max_run: int = MAX_RUN):
-    """Fill runs of clipped pixels along `axis` (≤ `max_run` long) from their flanks.
-
-    Returns (filled image, (H, W) bool mask of the filled pixels). A run touching the image
-    border or longer than `max_run` is left as it is.
-
-    The nearest unclipped index and value above and below every pixel come from one
-    `lax.scan` along ``axis`` (both directions at once). XLA's CPU cumulative max transposes
-    to scan along the minor axis and then needs gathers for the flank values: that cost the
-    114×640 tracking band of rows 1.56 ms against 0.43 ms, a 480×640 frame 6.4 against
-    2.0 ms, the 480×178 band of columns 1.24 against 0.99 ms (issue 13, load 4–5.6, same
-    runs; the columns are scanned on the transposed band).
-    """
-    c = jnp.asarray(clipped)
-    n = mono.shape[axis]
-    if axis == 0:
-        above, fa, below, fb = _flanks_rows(mono, c)
-    else:
-        above, fa, below, fb = (x.T for x in _flanks_rows(mono.T, c.T))
-    length = below - above - 1
-    inner = (above >= 0) & (below < n)
-    run = c & inner & (length <= max_run)
-    level = 1.5 * jnp.maximum(jnp.maximum(fa, fb), 0.0)
-    return jnp.where(run, level, mono), run
-
-
-def _flanks_rows(m, c):
-    """Per pixel: the last unclipped row ≤ i and its value, the first ≥ i and its value
-    (-1 / n and 0 where there is none), in one scan down and up the rows at once.
-
-    The two directions travel stacked, (2, W) per step: 2 slices in and 2 updates out a
-    step instead of 5 and 4 (issue 13: same outputs; 400 interleaved calls at load 5, the
-    114×640 band of rows 0.76 → 0.70 ms, the 480×178 band of columns 1.96 → 1.64 ms).
-    """
-    n, w = m.shape
-
-    def step(carry, xs):
-        k, index, value = carry
-        clipped, mono = xs
-        here = jnp.stack([k, n - 1 - k])[:, None]
-        index, value = jnp.where(clipped, index, here), jnp.where(clipped, value, mono)
-        return (k + 1, index, value), (index, value)
-
-    start = jnp.broadcast_to(jnp.asarray([-1, n], jnp.int32)[:, None], (2, w))
-    init = (jnp.zeros((), jnp.int32), start, jnp.zeros((2, w), m.dtype))
-    xs = (jnp.stack([c, c[::-1]], 1), jnp.stack([m, m[::-1]], 1))
-    _, (index, value) = lax.scan(step, init, xs)
-    return index[:, 0], value[:, 0], index[::-1, 1], value[::-1, 1]
 
 
 # Kurtosis of a colour space from the channels' moments. I − μ = w·d (d: the centred RGB of a

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cslx.runtime.band_input import band_image, frame_input, frame_stats, image_cutter, rgb_cutter
-from cslx.runtime.pipeline import PipelineConfig, _bands, init_state
+from cslx.runtime.pipeline import PipelineConfig, _bands, _dome, init_state
 from cslx.segmentation.robust import MAX_RUN
 
 W = (1.0, -1.0, 0.0)
@@ -26,17 +26,22 @@ def _clipped_frame(seed, h=120, w=96):
     return jnp.asarray(rgb)
 
 
+#: The domed fill along both axes (heights 1 / 0.5), every gate on.
+DOME_BOTH = (1.0, 0.5, 0.5, 3, 1, 4)
+
+
+@pytest.mark.parametrize("dome", [(), DOME_BOTH])
 @pytest.mark.parametrize("seed", [0, 1])
-def test_band_image_equals_band_of_filled_frame(seed):
+def test_band_image_equals_band_of_filled_frame(seed, dome):
     rgb = _clipped_frame(seed)
-    I_h, I_v = frame_input(rgb, W, jnp.float32)
+    I_h, I_v = frame_input(rgb, W, jnp.float32, True, dome)
     # the fill changed something, or the test would not test it
     assert not np.array_equal(np.asarray(I_h), np.asarray(I_v))
-    cut = jax.jit(band_image, static_argnums=(2, 3, 4, 5, 6))
+    cut = jax.jit(band_image, static_argnums=(2, 3, 4, 5, 6, 7))
     for axis, ref, size in ((0, I_h, 16), (1, I_v, 24)):
         n = rgb.shape[axis]
         for start in (0, 1, 7, 30, n // 2, n - size - 1, n - size):
-            got = np.asarray(cut(rgb, start, size, axis, W, jnp.float32, True))
+            got = np.asarray(cut(rgb, start, size, axis, W, jnp.float32, True, dome))
             want = np.asarray(jax.lax.dynamic_slice_in_dim(ref, start, size, axis))
             np.testing.assert_array_equal(got, want)
     # without the fill: the colour image's band
@@ -82,3 +87,63 @@ def test_frame_stats_subsample():
     assert float(full[1]) == pytest.approx(float(np.mean(np.any(np.asarray(rgb) >= 255, -1))))
     sub = frame_stats(rgb, jnp.float32, 4)
     assert float(sub[0]) == pytest.approx(float(full[0]), rel=0.05)
+
+
+def _stripe_glint_blob():
+    """Grey frame (60) with a horizontal red stripe whose R core clips over 12 rows (rows
+    25–36) in columns 4–59, a white glint (all channels 255, rows 8–17, columns 28–33) in a
+    red halo, and a compact red blob clipped in R only (rows 44–53, columns 10–13) in one."""
+    y = np.arange(64)[:, None].astype(float)
+    rgb = np.full((64, 64, 3), 60.0)
+    rgb[:, 4:60, 0] = 60 + 400 * np.exp(-0.5 * ((y - 30.5) / 5.0) ** 2)
+    rgb[6:20, 26:36, 0] = 150
+    rgb[8:18, 28:34] = 255
+    rgb[42:56, 8:16, 0] = 150
+    rgb[44:54, 10:14, 0] = 255
+    return jnp.asarray(np.clip(rgb, 0, 255).astype(np.uint8))
+
+
+#: The gated dome of `PipelineConfig` (issue 12, opt-in): height 1 down the columns, runs
+#: longer than 7 px, at most half of them white or without a clipped pixel 6 px to a side.
+DOME_GATED = _dome(
+    PipelineConfig(
+        clip_dome=1.0, clip_dome_axes=1, clip_dome_min_run=7, clip_dome_white=0.5, clip_dome_along=6
+    )
+)
+
+
+def test_gated_dome_ridges_a_clipped_stripe_core_but_not_a_glint_or_a_blob():
+    """The domed fill (issue 12): a stripe's clipped core gets a ridge at its middle; a
+    white glint and a compact clipped blob keep the flat level (no ridge)."""
+    rgb = _stripe_glint_blob()
+    assert np.array_equal(np.flatnonzero(np.asarray(rgb)[:, 20, 0] == 255), np.arange(25, 37))
+    I_h = np.asarray(frame_input(rgb, W, jnp.float32, True, DOME_GATED)[0])
+    core = I_h[25:37, 20]
+    # a ridge: highest at the run's middle (rows 30 / 31), falling to both ends, curved
+    assert np.argmax(core) in (5, 6)
+    assert np.all(np.diff(core[:6]) > 0) and np.all(np.diff(core[6:]) < 0)
+    assert core[5] - core[0] > 0.2 * core[0]
+    # the glint and the blob: one flat level, as the flat fill writes
+    flat = np.asarray(frame_input(rgb, W, jnp.float32, True, ())[0])
+    for rows, col in ((slice(8, 18), 30), (slice(44, 54), 11)):
+        np.testing.assert_array_equal(I_h[rows, col], flat[rows, col])
+        assert np.ptp(I_h[rows, col]) == 0
+    # the flat fill writes one level over the core: no ridge there
+    assert np.ptp(flat[25:37, 20]) == 0
+    # the colour gate alone keeps the glint flat; the blob (red only) needs the geometry gate
+    colour = DOME_GATED[:5] + (0,)
+    I_c = np.asarray(frame_input(rgb, W, jnp.float32, True, colour)[0])
+    assert np.ptp(I_c[8:18, 30]) == 0 and np.ptp(I_c[44:54, 11]) > 0
+
+
+def test_tracker_default_domes_a_clipped_stripe_core_and_keeps_a_glint_flat():
+    """The tracker's pipeline (`tracking_config`) uses the gated dome: the clipped core gets
+    a ridge at its middle, the white glint keeps the flat fill's level."""
+    from cslx.runtime.tracker import tracking_config
+
+    rgb = _stripe_glint_blob()
+    I_h = np.asarray(frame_input(rgb, W, jnp.float32, True, _dome(tracking_config()))[0])
+    flat = np.asarray(frame_input(rgb, W, jnp.float32, True, ())[0])
+    core = I_h[25:37, 20]
+    assert np.argmax(core) in (5, 6) and core[5] - core[0] > 0.2 * core[0]
+    np.testing.assert_array_equal(I_h[8:18, 30], flat[8:18, 30])

@@ -1,0 +1,188 @@
+"""`PipelineConfig`: the settings of the per-frame pipeline (`cslx.runtime.pipeline`).
+
+Every field is static: it shapes the compiled program. The docstring records, field by
+field, the evidence for each default.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+
+from ..segmentation.med import default_filter_length
+from .weld import WeldConfig
+
+__all__ = ["PipelineConfig"]
+
+
+class PipelineConfig(eqx.Module):
+    """Settings of the per-frame pipeline; every field shapes the compiled program (static).
+
+    weights: colour weights (w_r, w_g, w_b) of eq. (8); default R − G (the paper's space).
+    L_h / L_v: full-frame MED filter lengths for the horizontal (down columns) and vertical
+        (along rows) stripe; None = 50 % of the segment (the paper's choice, correction 7).
+    L_roi: MED filter length inside the tracking bands (≤ the band size). 16, even; the odd
+        lengths 15 and 17, whose whole-sample delay (L − 1)/2 lets `med` read the band output
+        as a slice of the convolution (`cslx.segmentation.med_fft.centre_output`), were tried
+        and dropped (issue 13). 17: on dev video (seeds 0 / 1 / 3) band − full-frame centres
+        0.023 / 0.010 / 0.014 px (16: 0.025 / 0.010 / 0.014), but on the clean rendered cross
+        frame of tests/runtime/test_pipeline.py its band filter converged to two lobes 6 px
+        apart and the horizontal stripe came out 3.0 px off (16: 0.11 px). 15: no lobes and
+        band − full-frame agreement as good (worst |median| over 6 frames × 2 stripes of
+        rendered video, clean / sunny / glare / shadow × dev seeds 0, 1, 3: ≤ 0.019 px, 16:
+        ≤ 0.019 px; clean cross and straight frames of the tests' scenes, seeds 31–36:
+        ≤ 0.013 px, 16: ≤ 0.012 px) and tracking ``process_frame`` 6 % faster (10.28 against
+        10.93 ms median, 150 interleaved frames each, load 3.2–3.4), but the centres are
+        noisier: median |centre − truth| 0.132 against 0.126 px (worse in 11 of the 12
+        videos), 0.142 against 0.119 px on the horizontal stripe of the clean frames (12 of
+        12), and over the rendered T approaches of experiments/tracking_sequences.py (dev
+        seed 7301, tracker with MED; its default has none) offset error mean up in 7 of 8
+        runs (shadow, beside: 0.148 → 0.237 mm, max 0.467 → 0.713 mm).
+    max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
+        for the full frame; roi_max_steps for the tracking bands: the band filter is carried
+        from frame to frame and evolves slowly, so a fixed 2 steps per frame keep it at the
+        fixed point (issue 13; tracking over rendered sunny video, band − full-frame MED
+        centres, worst |median| over 7 frames × 2 stripes: dev seed 1 0.010 px with 1, 2, 3
+        steps, 0.009 px with ≤ 6 (5 taken); held-out seed 2 0.029 px with 1 and 2; median
+        |centre − truth| unchanged, 0.104–0.110 px). 2 rather than 1 for margin after a
+        sudden change; ≤ 6 cost ≈ 2 ms more a frame. ``tol`` is 1e-2, not Table 2's 1e-4
+        (issue 13, `experiments.med_start`, dev seeds 7100–7113, 2 frames of each red-laser
+        condition, cold frames from `init_state`): the kurtosis of the last steps creeps
+        by < 1 % a step while no centre moves. With the first-pass bands (79 % of those
+        frames) MED took 15.7 / 16.8 steps (h / v) at 1e-4 and 10.1 / 10.3 at 1e-2, the
+        frame 38.8 → 30.0 ms (load 6); median / p95 error per condition within
+        ±0.002 / ±0.015 mm. On the full frame (``roi=False``) 15.8 / 13.9 → 9.2 / 9.4
+        steps, 178 → 121 ms at load 5, every condition within ±0.01 / ±0.22 mm (p95 of the
+        saturated stripe v 5.07 → 4.85 mm).
+    start: the full-frame filters' cold start (`init_state`): ``"impulse"`` (a centred unit
+        impulse: the first output is the input itself) or Table 2's ``"flat"`` 1/√L. From
+        the flat start the first 3–4 steps only climb out of a low-pass filter (excess
+        kurtosis ≈ −1 → 1 → 16–55) before the stripe sharpens. Same runs, full frame, tol
+        1e-2: flat → impulse 9.2 / 9.4 → 5.9 / 5.7 steps, 121 → 83 ms; the saturated core
+        found where the flat start's fixed point missed it (v: p95 4.85 → 0.45 mm, gross
+        5.6 → 2.0 % over all conditions), the others within ±0.02 mm median, p95 ±0.05 mm
+        (printed h 1.14 → 1.19 mm). The band filters always start flat: started from the
+        impulse the 16-tap linear-phase band filters converged elsewhere (saturated h
+        median 0.08 → 29 mm, clean 0.119 → 0.148 mm).
+    med_stride: on the full frame, MED's filter is found on every k-th column (row) and
+        then applied to all of them (`cslx.segmentation.med.med_apply`): one filter serves
+        the whole frame, and 320 / 240 segments pin it down as well as 640 / 480 (issue 13,
+        `experiments.med_start --pipeline --full-frame`, dev seeds 7100–7113, 2 frames of
+        each red-laser condition: k = 2 / 3 against 1, every condition within ±0.007 mm
+        median and ±0.025 mm p95, cold full frame 70.4 → 60.0 / 56.2 ms at load 4). 2 is the
+        default; the bands (64 / 128 samples a segment) use every segment.
+    sigma: Steger scale, px, for frames up to 480 px; larger frames scale it by
+        min(H, W) / 480 (`_frame_config`). Rig audit, 1280×720 at twice the focal length
+        (clean T scenes, dev seeds 8804–8805, cold frames): σ 2 gave 36–91 gross (> 1 mm)
+        centres per stripe, median 0.32–0.39 mm; σ 3 (this rule) 0–5, 0.15–0.21 mm; σ 4
+        0, 0.09–0.14 mm (the frame size understates that rig's 2× magnification; the
+        focal length, a traced value here, cannot set a static σ).
+    threshold / snr: Steger's relative and noise-floor thresholds.
+    roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
+        half-width of the column band around the vertical stripe, px; 0 disables the ROI.
+    roi_margin: a stripe closer than this to its band's edge ends tracking mode.
+    first_pass / first_pass_fraction: on a frame without tracking state (the first, or
+        after the stripes were lost) with the ROI allowed, locate the bands from the
+        brightest sample of each column / row (`_first_pass`) and run MED (from the band
+        filters in the state, up to ``max_steps``) and Steger in the bands when at least
+        ``first_pass_fraction`` of those samples fall inside them; otherwise, or with
+        ``roi=False``, the full frame. MED only where the stripe is (issue 13).
+    min_valid_fraction: share of columns (rows) with a centre needed to keep tracking mode.
+    median_half / outlier_mm / smooth_half: 3-D profile clean-up before the weld features
+        (`clean_profile`: gross outliers out, light smoothing along the stripe).
+    use_med: False skips MED (Steger on the monochrome image), for ablations.
+    roi_med: run MED inside the tracking bands too (default on). Band MED used to be off:
+        on bands of 64–192 samples its filter shifted centres by 1.0–1.9 px. The cause was
+        the delay estimate, not the short segments: on short segments MED converges to a
+        one-sided, edge-enhancing filter, and the cross-correlation peak (exact only for a
+        symmetric filter) sits 1–2 px from where the detector sees the filtered ridge. With
+        ``med_delay="ridge"`` the delay is the measured displacement of the ridge itself
+        (`cslx.segmentation.med_fft.ridge_delay`): band centres then agree with full-frame
+        MED to a median 0.00–0.04 px on held-out rendered frames (issue 13).
+    roi_symmetric: the band filters are linear-phase (`cslx.segmentation.med.med`,
+        ``symmetric=True``; delay exactly (L_roi − 1)/2). Converged free band filters are
+        one-sided and moved band centres up to 0.18 px from full-frame MED (the first-pass
+        bands of issue 13; also tracking, once the warm-started band filters converge over
+        frames); linear-phase ones stay within 0.04 px and converge in fewer steps.
+    med_delay: ``"ridge"`` (default; the ridge displacement at Steger's scale ``sigma``) or
+        ``"xcorr"`` (the correlation peak of `cslx.segmentation.med.med`'s default), for the
+        full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
+        centres 0.05–0.15 px off the ground truth where "ridge" and Steger on the colour
+        image stay within 0.05 px.
+    clip_dome / clip_dome_axes / clip_dome_min_run / clip_dome_white / clip_dome_colour /
+        clip_dome_along: the domed clipped-core fill (issue 12; opt-in, 0 = the flat fill).
+        A clipped run longer than ``clip_dome_min_run`` px (`DOME_MIN_RUN`, √3·σ, when 0)
+        along the fill axes in ``clip_dome_axes`` (1: down the columns, the horizontal
+        stripe's image; 2: along the rows; 3: both) gets a parabola over the flat level,
+        1 + ``clip_dome`` at its middle, unless more than ``clip_dome_white`` of its pixels
+        are odd: clipped in a channel that is not the laser's (`white_mask`, when
+        ``clip_dome_colour``) or, with ``clip_dome_along`` > 0, without a clipped pixel that
+        many px to either side across the fill axis (a compact blob, not a core elongated
+        along the stripe). Off here (the paper's pipeline); the tracker's pipeline
+        (`cslx.runtime.tracker.tracking_config`) uses 1 / axes 1 / min run 7 / white 0.5,
+        which over the 48 dev T approaches took the runs missing an issue-12 goal from 32
+        to 15. Every setting tried helped sun and shadow but made glare worse (experiments/
+        tracking_diagnostics.py's docstring; e.g. 1 / axes 1 / min run 7 / white 0.5: sunny
+        offset mean 0.218 → 0.125 mm, max worst 3.09 → 1.51 mm, heading 0.520 → 0.328°;
+        glare 0.101 → 0.116 mm, max worst 1.10 → 1.50 mm, heading 0.301 → 0.346°). On the
+        tracker's first pass (every ``first_pass_stride``-th column) ``clip_dome_along``
+        counts strided columns.
+    band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
+        convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
+        `fill_clipped`; equal to the bands of the converted frame). False converts the
+        whole frame first (before; tracking frames 53.8 ms against 35.8 ms in one run of
+        experiments/bench_speed.py at load 5–6). first_pass_stride: with ``band_first``, the
+        first pass looks at every k-th column (row) only; its band is the median of those
+        peaks. stats_stride: brightness and saturated share from every k-th row and column
+        (`cslx.runtime.band_input.frame_stats`; 1 = the whole frame).
+    weld: the bead detector's settings. The junction threshold is lowered to 0.1 (the
+        detector's default is 0.3): on rendered T frames the crossing bead on the vertical
+        stripe is found at the right x_r (±0.5 mm) with confidence 0.15–0.25, and no
+        straight frame gave a vertical bead at all; the tracker confirms a junction over
+        two frames before reporting it.
+    """
+
+    weights: tuple[float, float, float] = eqx.field(static=True, default=(1.0, -1.0, 0.0))
+    L_h: int | None = eqx.field(static=True, default=None)
+    L_v: int | None = eqx.field(static=True, default=None)
+    L_roi: int = eqx.field(static=True, default=16)
+    max_steps: int = eqx.field(static=True, default=30)
+    roi_max_steps: int = eqx.field(static=True, default=2)
+    tol: float = eqx.field(static=True, default=1e-2)
+    sigma: float = eqx.field(static=True, default=2.0)
+    threshold: float = eqx.field(static=True, default=0.1)
+    snr: float = eqx.field(static=True, default=5.0)
+    roi_half_h: int = eqx.field(static=True, default=32)
+    roi_half_w: int = eqx.field(static=True, default=64)
+    roi_margin: int = eqx.field(static=True, default=8)
+    first_pass: bool = eqx.field(static=True, default=True)
+    first_pass_fraction: float = eqx.field(static=True, default=0.9)
+    min_valid_fraction: float = eqx.field(static=True, default=0.5)
+    median_half: int = eqx.field(static=True, default=4)
+    outlier_mm: float = eqx.field(static=True, default=1.0)
+    smooth_half: int = eqx.field(static=True, default=3)
+    use_med: bool = eqx.field(static=True, default=True)
+    start: str = eqx.field(static=True, default="impulse")
+    med_stride: int = eqx.field(static=True, default=2)
+    roi_med: bool = eqx.field(static=True, default=True)
+    roi_symmetric: bool = eqx.field(static=True, default=True)
+    med_delay: str = eqx.field(static=True, default="ridge")
+    fill_clipped: bool = eqx.field(static=True, default=True)
+    clip_dome: float = eqx.field(static=True, default=0.0)
+    clip_dome_white: float = eqx.field(static=True, default=0.0)
+    clip_dome_axes: int = eqx.field(static=True, default=3)
+    clip_dome_min_run: int = eqx.field(static=True, default=0)
+    clip_dome_colour: int = eqx.field(static=True, default=1)
+    clip_dome_along: int = eqx.field(static=True, default=0)
+    band_first: bool = eqx.field(static=True, default=True)
+    first_pass_stride: int = eqx.field(static=True, default=4)
+    stats_stride: int = eqx.field(static=True, default=4)
+    weld: WeldConfig = WeldConfig(junction_min_confidence=0.1)
+
+    def lengths(self, height: int, width: int) -> tuple[int, int]:
+        """Full-frame filter lengths (L_h, L_v) for an (height, width) frame."""
+        L_h = default_filter_length(height) if self.L_h is None else self.L_h
+        L_v = default_filter_length(width) if self.L_v is None else self.L_v
+        return L_h, L_v
+
+    def roi_enabled(self, height: int, width: int) -> bool:
+        return 0 < 2 * self.roi_half_h < height and 0 < 2 * self.roi_half_w < width
