@@ -94,19 +94,17 @@ def _fill(rgb, I, clip, weights, axis: int, dome: tuple):
     height = float(dome[axis]) if dome else 0.0
     if height <= 0:
         return fill_clipped(I, clip, axis=axis)[0]
-    share, min_run = float(dome[2]), int(dome[3]) or DOME_MIN_RUN
-    colour = dome[4] if len(dome) > 4 else 1
+    _, _, share, min_run, colour, along = dome
     white = white_mask(rgb, weights) if colour else None
-    along = int(dome[5]) if len(dome) > 5 else 0
     return fill_clipped(
         I,
         clip,
         axis=axis,
         white=white,
         dome=height,
-        dome_min_run=min_run,
-        dome_white_share=share,
-        dome_along=along,
+        dome_min_run=int(min_run) or DOME_MIN_RUN,
+        dome_white_share=float(share),
+        dome_along=int(along),
     )[0]
 
 
