@@ -10,7 +10,14 @@ which goes first. Reported: median, p10 and p90 per frame, the load, and the lar
 difference between the two programs' outputs over the first frames (0 when the change
 keeps the outputs bit for bit).
 
+``--program`` picks what is timed: ``pipeline`` (the above, the default), ``tracking`` (the
+same `process_frame` with the tracker's `tracking_config()`: no MED, domed clipped-core
+fill) or ``tracker`` (`Tracker.step` on NumPy frames, the robot's loop end to end: its one
+compiled step, the transfers to the host and the Kalman filter; compared outputs: the
+step's per-frame values, ``Observation.raw``, and the filtered offset and heading).
+
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev HEAD~1 --calls 300
+    OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev main --program tracker
 """
 
 from __future__ import annotations
@@ -41,13 +48,18 @@ def export_revision(rev: str, folder: pathlib.Path, name: str) -> None:
     (folder / "cslx").rename(folder / name)
 
 
-def tracker(package: str, frame):
+def tracker(package: str, frame, program: str = "pipeline"):
     """(step, state) of the tracking mode of ``package`` after a few warm-up frames."""
     import jax
 
+    if program == "tracker":
+        return robot_tracker(package, frame)
     pipeline = importlib.import_module(f"{package}.runtime.pipeline")
     sensor = sensor32(package)
-    config = pipeline.PipelineConfig()
+    if program == "tracking":
+        config = importlib.import_module(f"{package}.runtime.tracker").tracking_config()
+    else:
+        config = pipeline.PipelineConfig()
     state = pipeline.init_state(config, sensor.camera.image_size)
 
     def step(rgb, state):
@@ -59,21 +71,51 @@ def tracker(package: str, frame):
     return step, state
 
 
+def robot_tracker(package: str, frame):
+    """(step, None) of ``package``'s `Tracker` (default settings) after warm-up frames; the
+    step returns the observation's numbers (raw values, offset, heading) as one array."""
+    import logging
+
+    runtime_tracker = importlib.import_module(f"{package}.runtime.tracker")
+    sensor = importlib.import_module(f"{package}.sensor").default_sensor()
+    robot = runtime_tracker.Tracker(sensor, log=logging.getLogger("ab_tracking"))
+    frame = np.asarray(frame)
+
+    def step(rgb, state):
+        obs = robot.step(rgb)
+        values = [obs.offset_mm, obs.heading_deg, *obs.raw.values()]
+        return np.asarray(values, float), state
+
+    for _ in range(10):  # past the σ / colour checks of the first frames
+        step(frame, None)
+    return step, None
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rev", default="HEAD", help="git revision to compare against")
     ap.add_argument("--calls", type=int, default=300, help="timed frames per program")
     ap.add_argument("--frames", type=int, default=24, help="video frames (ping-pong)")
     ap.add_argument("--seed", type=int, default=0, help="video seed (bench_speed's)")
+    ap.add_argument(
+        "--program",
+        choices=("pipeline", "tracking", "tracker"),
+        default="pipeline",
+        help="process_frame with PipelineConfig() / with tracking_config(), or Tracker.step",
+    )
     args = ap.parse_args(argv)
     import jax
 
-    frames = [jax.numpy.asarray(f) for f in video_frames(args.frames, args.seed)]
+    frames = video_frames(args.frames, args.seed)
+    if args.program == "tracker":
+        frames = [np.asarray(f) for f in frames]
+    else:
+        frames = [jax.numpy.asarray(f) for f in frames]
     load_start = load_average()
     with tempfile.TemporaryDirectory() as tmp:
         export_revision(args.rev, pathlib.Path(tmp), "cslx_rev")
         sys.path.insert(0, tmp)
-        runs = {name: tracker(name, frames[0]) for name in ("cslx_rev", "cslx")}
+        runs = {name: tracker(name, frames[0], args.program) for name in ("cslx_rev", "cslx")}
         states = {name: state for name, (_, state) in runs.items()}
         times = {name: [] for name in runs}
         outputs = {name: [] for name in runs}
@@ -93,7 +135,10 @@ def main(argv=None) -> None:
         int(np.sum(np.isnan(a.astype(float)) != np.isnan(b.astype(float))))
         for a, b in zip(outputs["cslx_rev"], outputs["cslx"], strict=True)
     )
-    print(f"load {load_start} → {load_average()}; {args.calls} interleaved frames each")
+    print(
+        f"load {load_start} → {load_average()}; {args.program}: {args.calls} interleaved "
+        "frames each"
+    )
     for name, label in (("cslx_rev", f"revision {args.rev}"), ("cslx", "working tree")):
         ms = np.asarray(times[name]) * 1e3
         print(
