@@ -36,6 +36,41 @@ def test_masked_median_equals_nanmedian():
             assert abs(got - ref) <= 1e-6 * abs(ref), (t, ref, got)
 
 
+def test_masked_median_bracket_edge_cases_bit_for_bit():
+    """The bracketed bisection stops when one point is left in its bracket, or runs down to a
+    single key (a repeated middle value): against `jnp.nanmedian` bit for bit, batched with
+    `vmap` (the loop's stopping test is then per row), on ties, a single point, no point,
+    infinities, signed zeros, subnormals and values spread over many octaves."""
+    rng = np.random.default_rng(13)
+    n = 96
+    rows, masks = [], []
+    for t in range(64):
+        x = (rng.standard_normal(n) * 10 ** rng.uniform(-30, 30, n)).astype(np.float32)
+        kind = t % 8
+        if kind == 1:
+            x = np.round(rng.standard_normal(n)).astype(np.float32)  # few distinct values
+        if kind == 2:
+            x[:] = 7.0  # one value
+        if kind == 3:
+            x[rng.random(n) < 0.3] = np.inf
+            x[rng.random(n) < 0.3] = -np.inf
+        if kind == 4:
+            x = np.where(rng.random(n) < 0.5, np.float32(0.0), np.float32(-0.0))
+            x[::7] = np.float32(1e-40)  # subnormal
+        if kind == 5:
+            x[rng.random(n) < 0.5] = np.nan
+        m = rng.random(n) < (0.0, 1.0 / n, 2.0 / n, 0.5, 1.0)[t % 5]
+        if t % 5 == 1:
+            m[rng.integers(n)] = True  # exactly one point (or two)
+        rows.append(x)
+        masks.append(m)
+    x, m = jnp.asarray(np.stack(rows)), jnp.asarray(np.stack(masks))
+    got = np.asarray(jax.jit(jax.vmap(masked_median))(x, m))
+    ref = np.asarray(jax.vmap(lambda a, b: jnp.nanmedian(jnp.where(b, a, jnp.nan)))(x, m))
+    np.testing.assert_array_equal(got, ref)
+    assert np.isnan(got[np.asarray(m).sum(1) == 0]).all()
+
+
 def test_masked_median_other_dtypes_fall_back():
     x = jnp.asarray([3.0, 1.0, 2.0, 10.0], jnp.float16)
     assert float(masked_median(x, jnp.asarray([True, True, True, False]))) == 2.0
