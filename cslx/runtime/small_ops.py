@@ -75,7 +75,9 @@ def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array
     the bracket in one pass (no count of the lower one). A chain of 13 medians of 640 points
     (the plate fit's IRLS) went 11.4 → 6.4 µs a median (300 interleaved calls, load 6–7), the
     weld features of 24 tracking frames 2.31 → 2.16 ms (800 interleaved calls, load 7; the
-    medians' share, by a stub, 0.52 → 0.37 ms; issue 13).
+    medians' share, by a stub, 0.52 → 0.37 ms; issue 13); a whole frame, below the
+    scatter at load 5–7 (experiments.ab_tracking, 300 interleaved frames): `Tracker.step`
+    8.23 → 8.13 ms, tracking mode with MED 11.48 → 11.48 ms, outputs identical.
     Before, bisecting for the lower rank alone (rather than both ranks in each pass) took a
     median of 640 points from 14.8 to 9.7 µs (issue 13; interleaved, same run, load 23).
     Tried against the 32-pass bisection (13 chained medians of 640 points in one loop, 300
