@@ -249,7 +249,13 @@ def tracking_config():
     from .pipeline import PipelineConfig
 
     return PipelineConfig(
-        use_med=False, clip_dome=1.0, clip_dome_axes=1, clip_dome_min_run=7, clip_dome_white=0.5
+        use_med=False,
+        clip_dome=1.0,
+        clip_dome_axes=1,
+        clip_dome_min_run=7,
+        clip_dome_white=0.5,
+        clip_weight=0.1,
+        clip_weight_run=7,
     )
 
 

@@ -292,6 +292,7 @@ def stripe_feature(
     valid: Bool[Array, " n"],
     axis: int,
     config: WeldConfig = WeldConfig(),
+    weights: Float[Array, " n"] | None = None,
 ) -> WeldFeature:
     """The weld bead crossed by one stripe (module docstring: plate, height, run, cap).
 
@@ -301,6 +302,11 @@ def stripe_feature(
         valid: (N,) which points were detected (invalid rows may hold anything, even NaN).
         axis: 1 for the horizontal stripe (position = y_r), 0 for the vertical (x_r).
         config: WeldConfig.
+        weights: (N,) optional prior weights of the points in the circle's and the cap
+            model's fits (steps 4 and 5; None: all 1): the pipeline gives a centre that a
+            clipped-core fill placed less weight (`cslx.runtime.pipeline_config.
+            PipelineConfig.clip_weight`). A weight < 0.5 also leaves the point out of the
+            confidence's coverage count.
     Returns:
         WeldFeature; jit/vmap-able, differentiable in `points` for a fixed bead run.
     """
@@ -338,6 +344,8 @@ def stripe_feature(
     # 4. circular cap, refitted with Tukey weights on its geometric residuals: the cap that
     # best explains the run, whatever a glint or a clipped core left in it
     w_run = run.astype(dtype)
+    if weights is not None:  # prior weights (the cap model's below too)
+        w_run = w_run * jnp.asarray(weights, dtype)
     t_run, h_run = jnp.where(run, t, 0.0), jnp.where(run, h, 0.0)
     a, b, R, rms = _circle_fit(t_run, h_run, w_run, config.n_gauss_newton)
 
@@ -380,10 +388,13 @@ def stripe_feature(
     # the cap model over the bead and the plate around it
     half0 = jnp.clip(0.5 * width, 0.5 * config.min_width_mm, 0.5 * config.max_width_mm)
     near = valid & (jnp.abs(t - a) < half0 + config.cap_margin_mm)
+    w_cap = near.astype(dtype)
+    if weights is not None:
+        w_cap = w_cap * jnp.asarray(weights, dtype)
     p_cap, _ = _cap_fit(
         jnp.where(near, t, 0.0),
         jnp.where(near, h, 0.0),
-        near.astype(dtype),
+        w_cap,
         jnp.stack([a, half0, jnp.clip(height, 0.1, 10.0)]),
         sigma,
         config.n_cap,
@@ -432,6 +443,7 @@ def weld_features(
     profile_v: Float[Array, "h 3"],
     valid_v: Bool[Array, " h"],
     config: WeldConfig = WeldConfig(),
+    weights_h: Float[Array, " w"] | None = None,
 ) -> tuple[WeldFeature, WeldFeature, Bool[Array, ""]]:
     """Beads on both stripes and the T-junction flag.
 
@@ -442,13 +454,15 @@ def weld_features(
             crossing weld (`cslx.runtime.junction.crossing_feature`: found from its far
             side, beside the followed weld or along its flank), position = its x_r.
         config: WeldConfig.
+        weights_h: (W,) optional weights of the horizontal stripe's points in its bead's
+            circle and cap fits (`stripe_feature`).
     Returns:
         (feature_h, feature_v, junction) with junction true when the vertical stripe crosses
         a bead with confidence ≥ config.junction_min_confidence.
     """
     from .junction import crossing_feature
 
-    fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config)
+    fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config, weights_h)
     # where the stripes cross, the vertical stripe's centres are pulled by the horizontal
     # one: in rendered sunlight every stray junction report lay within 10 mm of it
     x_h = masked_median(profile_h[:, VERTICAL_AXIS], valid_h)  # = nanmedian, no sort
