@@ -161,6 +161,22 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   and the confidence's coverage counting those centres at their weight, 16. The heading
   the vertical stripe sees (`KalmanConfig.use_vertical_heading`) on, first 24 runs:
   misses 10 → 13, clean heading 0.31 → 0.69° (stopped there).
+- adopted next: the window's biweight line (`cslx.runtime.line_filter.robust_line`) gets 8
+  more iterations at Tukey's textbook cut-off 4.685 from the line c = 3 found
+  (`KalmanConfig.heading_tukey_refine`): with 6–15 centres c = 3 drops good ones. All 48
+  dev runs, one process, against the clip-weighted tracker above: clean 0.085 / 0.374 /
+  0.69 / 0.273, sunny 0.108 / 0.421 / 0.86 / 0.281, glare 0.101 / 0.457 / 1.46 / 0.315,
+  shadow 0.115 / 0.493 / 1.07 / 0.439; runs missing a goal 14 → 12: heading 9 → 8 (1203
+  flank glare 0.51 → 0.46°, 7302 beside clean 0.54 → 0.45° met; 1203 flank clean 0.39 →
+  0.52° newly missed), offset mean 2 → 1 (1201 flank glare 0.225 → 0.195 mm), offset max
+  2 and false T 1 the same runs. Not kept: c = 4.685 from the start, misses 10 (heading 6:
+  sunny 0.267°, glare 0.311°) but a cluster of 8 glint-biased centres among 40 then pulls
+  the line from 2° to −0.09° (c = 4 and 3.5 too: −0.02°, 0.17°; tests/runtime/
+  test_line_filter.py), the case c = 3 is there for.
+- what is left (12 misses): heading 8 (the window's first 15–30 mm; 7305 beside shadow
+  1.98° from the shadow edge along the stripe), offset max 2 (7305 beside shadow 1.07 mm;
+  7305 flank glare 1.46 mm on frame 0, the crossing on the bead's flank), offset mean 1
+  (7305 beside shadow 0.39 mm), false T 1 (7305 flank glare frame 10).
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
