@@ -98,7 +98,13 @@ class PathHeading:
             m = np.median(h[:, 3])
             w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
         _, th, sd = robust_line(
-            h[:, 0], h[:, 1], w, self.x_ref, c.heading_scale_floor_mm, c.heading_tukey_c
+            h[:, 0],
+            h[:, 1],
+            w,
+            self.x_ref,
+            c.heading_scale_floor_mm,
+            c.heading_tukey_c,
+            c_refine=c.heading_tukey_refine,
         )
         if not math.isfinite(th):
             return NAN, NAN

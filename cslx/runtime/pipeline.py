@@ -46,6 +46,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
+from ..segmentation.clipped import centre_runs
 from ..segmentation.med import initial_filter, med, med_apply
 from ..segmentation.med_bands import band_snr_scale, first_peak
 from ..segmentation.steger import Centres, steger_centres
@@ -370,6 +371,20 @@ def _dome(config: PipelineConfig) -> tuple:
     )
 
 
+def _clip_weights(rgb, ch: Centres, config: PipelineConfig, dtype):
+    """Weights of the horizontal stripe's points in its bead's cap fit (None: all 1).
+
+    ``config.clip_weight`` for a centre on a clipped run longer than
+    ``config.clip_weight_run`` px down its column, or on a clipped run holding a white pixel
+    (`cslx.segmentation.clipped.centre_runs`): there the stripe's light was not measured and
+    the centre lies where the clipped-core fill put the ridge (`PipelineConfig`)."""
+    if config.clip_weight == 1.0 or not config.fill_clipped:
+        return None
+    length, white = centre_runs(rgb, ch.pos, ch.valid, config.weights, axis=0)
+    odd = (length > config.clip_weight_run) | (white & (length > 0))
+    return jnp.where(odd, config.clip_weight, 1.0).astype(dtype)
+
+
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):
     height, width = rgb.shape[:2]
     config = _frame_config(config, height, width)
@@ -395,7 +410,9 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
     new = _next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
     Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)
-    fh, fv, junction = weld_features(Ph, keep_h, Pv, keep_v, config.weld)
+    fh, fv, junction = weld_features(
+        Ph, keep_h, Pv, keep_v, config.weld, _clip_weights(rgb, ch, config, dtype)
+    )
     brightness, saturated = frame_stats(rgb, dtype, config.stats_stride)
     result = FrameResult(
         centres_h=ch,

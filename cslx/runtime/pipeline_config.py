@@ -126,6 +126,11 @@ class PipelineConfig(eqx.Module):
         glare 0.101 → 0.116 mm, max worst 1.10 → 1.50 mm, heading 0.301 → 0.346°). On the
         tracker's first pass (every ``first_pass_stride``-th column) ``clip_dome_along``
         counts strided columns.
+    clip_weight / clip_weight_run: the weight, in the horizontal stripe's bead fit (the cap
+        model, `cslx.runtime.weld.stripe_feature`), of a centre on a clipped run longer than
+        ``clip_weight_run`` px down its column or on a clipped run with a white pixel
+        (`cslx.runtime.pipeline._clip_weights`); 1 = off (the paper's pipeline). Evidence
+        in `cslx.runtime.tracker.tracking_config`.
     band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
         convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
         `fill_clipped`; equal to the bands of the converted frame). False converts the
@@ -173,6 +178,8 @@ class PipelineConfig(eqx.Module):
     clip_dome_min_run: int = eqx.field(static=True, default=0)
     clip_dome_colour: int = eqx.field(static=True, default=1)
     clip_dome_along: int = eqx.field(static=True, default=0)
+    clip_weight: float = eqx.field(static=True, default=1.0)
+    clip_weight_run: int = eqx.field(static=True, default=7)
     band_first: bool = eqx.field(static=True, default=True)
     first_pass_stride: int = eqx.field(static=True, default=4)
     stats_stride: int = eqx.field(static=True, default=4)

@@ -19,7 +19,7 @@ from jax import lax
 
 from ..config import CLIP_LEVEL
 
-__all__ = ["DOME_MIN_RUN", "MAX_RUN", "clipped_mask", "fill_clipped", "white_mask"]
+__all__ = ["DOME_MIN_RUN", "MAX_RUN", "centre_runs", "clipped_mask", "fill_clipped", "white_mask"]
 
 #: Longest clipped run (px along the search axis) treated as a saturated laser core.
 MAX_RUN = 24
@@ -42,6 +42,42 @@ def white_mask(image, weights, clip_level: float = CLIP_LEVEL):
     if not others:
         return jnp.zeros(channels[0].shape, bool)
     return functools.reduce(jnp.maximum, others) >= clip_level
+
+
+def centre_runs(rgb, pos, valid, weights, *, axis: int = 0, half: int = MAX_RUN // 2):
+    """The clipped run through each stripe centre: its length (px) and whether it is white.
+
+    Args:
+        rgb: (H, W, 3) 8-bit-scaled frame. pos: (N,) sub-pixel centres along ``axis`` (the
+            row of each column for axis 0, the horizontal stripe; the column of each row for
+            axis 1), frame coordinates. valid: (N,) which centres exist.
+        weights: the colour weights (static); a channel weighted ≤ 0 is not the laser's.
+        half: the run is followed this many px to either side of the centre's pixel (a
+            longer run counts 2·half + 1).
+    Returns:
+        (length (N,) int32: the run of pixels clipped in any channel that holds the centre's
+        pixel, 0 where that pixel is not clipped or the centre is not valid; white (N,)
+        bool: a pixel of that run is clipped in a channel that is not the laser's,
+        `white_mask`). A centre on a run longer than Steger's bar limit lies where the fill
+        (`fill_clipped`) put its ridge, not where the stripe's light was measured.
+    """
+    img = jnp.asarray(rgb)
+    if axis == 1:
+        img = jnp.transpose(img, (1, 0, 2))
+    n = img.shape[0]
+    r0 = jnp.round(jnp.where(valid, pos, -1e6)).astype(jnp.int32)
+    k = jnp.arange(-half, half + 1, dtype=jnp.int32)
+    rows = r0[None, :] + k[:, None]  # (2·half + 1, N)
+    inside = (rows >= 0) & (rows < n)
+    cols = jnp.arange(img.shape[1], dtype=jnp.int32)[None, :]
+    px = img[jnp.clip(rows, 0, n - 1), cols]  # (2·half + 1, N, 3)
+    clip = clipped_mask(px) & inside
+    white = white_mask(px, weights) & inside
+    up = jnp.cumprod(clip[half::-1].astype(jnp.int32), axis=0)  # the run from the centre up
+    down = jnp.cumprod(clip[half:].astype(jnp.int32), axis=0)
+    length = jnp.sum(up, axis=0) + jnp.sum(down, axis=0) - clip[half].astype(jnp.int32)
+    in_run = jnp.concatenate([up[::-1][:-1], down], axis=0).astype(bool)
+    return length, jnp.any(white & in_run, axis=0)
 
 
 @functools.partial(

@@ -147,3 +147,29 @@ def test_tracker_default_domes_a_clipped_stripe_core_and_keeps_a_glint_flat():
     core = I_h[25:37, 20]
     assert np.argmax(core) in (5, 6) and core[5] - core[0] > 0.2 * core[0]
     np.testing.assert_array_equal(I_h[8:18, 30], flat[8:18, 30])
+
+
+def test_centre_runs_length_and_white():
+    """`centre_runs` (issue 12): the clipped run through a centre's pixel down its column,
+    and whether it holds a white (non-laser channel) pixel; 0 off a run or for no centre."""
+    from cslx.segmentation.clipped import centre_runs
+
+    rgb = _stripe_glint_blob()
+    W_ = rgb.shape[1]
+    pos = np.full(W_, 3.0)  # rows 3: unclipped everywhere
+    valid = np.ones(W_, bool)
+    pos[20], pos[30], pos[11], pos[5] = 30.4, 12.0, 49.0, 30.0
+    valid[5] = False
+    length, white = centre_runs(rgb, jnp.asarray(pos), jnp.asarray(valid), W, axis=0)
+    length, white = np.asarray(length), np.asarray(white)
+    expect_core = int(np.sum(np.asarray(rgb)[:, 20].max(-1) >= 254))
+    assert length[20] == expect_core == 12 and not white[20]  # the stripe's red core
+    assert length[30] == 10 and white[30]  # the white glint, rows 8–17
+    assert length[11] == 10 and not white[11]  # the red blob, rows 44–53
+    assert length[5] == 0 and length[0] == 0  # no centre / an unclipped pixel
+    # the vertical stripe's axis: rows searched along the columns, the same as transposed
+    lt, wt = centre_runs(
+        jnp.transpose(rgb, (1, 0, 2)), jnp.asarray(pos), jnp.asarray(valid), W, axis=1
+    )
+    np.testing.assert_array_equal(np.asarray(lt), length)
+    np.testing.assert_array_equal(np.asarray(wt), white)

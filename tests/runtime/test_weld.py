@@ -305,3 +305,26 @@ def test_heading_from_vertical_stripe_unseen_or_ambiguous():
     mirror = _vertical_along_weld(rng, 0.0, 3.0, 16.0, 2.0)
     est, _ = heading_from_vertical(ph, mirror, apex[1], 16.0, 150.0)
     assert np.isnan(est) or abs(est - 3.0) < 0.3
+
+
+def test_weights_keep_the_cap_on_the_measured_flanks():
+    """Prior weights in the cap fit (issue 12, `PipelineConfig.clip_weight`): where a
+    clipped-core fill misplaced one flank's centres (rendered sun, dev seed 7305 beside,
+    frame 7: over 5 mm of a sunlit flank the heights sink progressively, to 2.5 mm below
+    the surface), the cap follows them, narrower and 1.5 mm off-centre; with those points
+    weighted 0.1 it rests on the measured flank, the crown and the plate past the toe."""
+    rng = np.random.default_rng(12)
+    width, height = 16.0, 2.0
+    pts, valid, apex = horizontal_profile(rng, 0.0, width, height, glint=False)
+    y = pts[:, 1]
+    bad = (y > 1.0) & (y < 6.0)  # one flank, as the fill left it
+    pts[bad, 2] -= 2.5 * (y[bad] - 1.0) / 5.0
+    P, V = jnp.asarray(pts), jnp.asarray(valid)
+    plain = stripe_feature(P, V, 1)
+    weighted = stripe_feature(P, V, 1, WeldConfig(), jnp.where(jnp.asarray(bad), 0.1, 1.0))
+    assert bool(plain.found) and bool(weighted.found)
+    assert abs(float(plain.position)) > 1.0, float(plain.position)  # the misplaced flank pulls
+    assert abs(float(weighted.position)) < 0.3, float(weighted.position)
+    # weights of 1 are the unweighted fit
+    ones = stripe_feature(P, V, 1, WeldConfig(), jnp.ones(len(pts)))
+    assert float(ones.position) == pytest.approx(float(plain.position), abs=1e-5)
