@@ -119,18 +119,30 @@ def _filter_axis(x: Array, sigma: float, orders: tuple[int, ...], axis: int) -> 
     (d c b a | a b c d | d c b a). Even kernels fold as g(k)(x[i−k] + x[i+k]), odd ones as
     g(k)(x[i−k] − x[i+k]).
     """
-    taps = {o: _taps(sigma, o) for o in orders}
-    r = len(taps[orders[0]]) - 1
-    n = x.shape[axis]
+    r = _radius(sigma)
     pad = [(0, 0)] * x.ndim
     pad[axis] = (r, r)
-    xp = jnp.pad(x, pad, mode="symmetric")
+    return _filter_padded(jnp.pad(x, pad, mode="symmetric"), sigma, orders, axis)
+
+
+def _radius(sigma: float) -> int:
+    return len(_taps(sigma, 0)) - 1
+
+
+def _filter_padded(xp: Array, sigma: float, orders: tuple[int, ...], axis: int) -> list[Array]:
+    """`_filter_axis` of an array already padded by the kernel radius r on both ends of
+    ``axis`` (the output is 2r shorter there: the valid part)."""
+    taps = {o: _taps(sigma, o) for o in orders}
+    r = len(taps[orders[0]]) - 1
+    n = xp.shape[axis] - 2 * r
 
     def shifted(k: int) -> Array:
         return lax.slice_in_dim(xp, r + k, r + k + n, axis=axis)
 
     centre = shifted(0)
-    out = {o: (centre * float(taps[o][0]) if o % 2 == 0 else jnp.zeros_like(x)) for o in orders}
+    out = {
+        o: (centre * float(taps[o][0]) if o % 2 == 0 else jnp.zeros_like(centre)) for o in orders
+    }
     even = [o for o in orders if o % 2 == 0]
     odd = [o for o in orders if o % 2 == 1]
     for k in range(1, r + 1):
@@ -170,10 +182,16 @@ class _Ridge(NamedTuple):
 
 def _ridge(image: Array, sigma: float, max_offset) -> _Ridge:
     """Per-pixel Hessian eigen-decomposition and Steger offset, closed form and grad-safe."""
-    a0, a1, a2 = _filter_axis(image, sigma, (0, 1, 2), 0)
-    ru, ruu = _filter_axis(a0, sigma, (1, 2), 1)
-    rv, ruv = _filter_axis(a1, sigma, (0, 1), 1)
-    (rvv,) = _filter_axis(a2, sigma, (0,), 1)
+    # The image is padded once in both axes: filtering the reflected columns down axis 0
+    # gives the reflected columns of the filtered image, so the second pass needs no padding
+    # of its three inputs (the same values bit for bit; issue 13: the six concatenations
+    # of the second pass's reflect padding cost the 480×128 band of columns ≈ 0.3 ms).
+    r = _radius(sigma)
+    xp = jnp.pad(image, r, mode="symmetric")
+    a0, a1, a2 = _filter_padded(xp, sigma, (0, 1, 2), 0)
+    ru, ruu = _filter_padded(a0, sigma, (1, 2), 1)
+    rv, ruv = _filter_padded(a1, sigma, (0, 1), 1)
+    (rvv,) = _filter_padded(a2, sigma, (0,), 1)
 
     half_diff = 0.5 * (rvv - ruu)
     q = half_diff**2 + ruv**2
