@@ -25,7 +25,15 @@ column the strongest wins; the selection is a max, a mask and masked sums instea
 σ follows Steger's condition for a bar profile of half-width w: σ ≥ w/√3
 (`sigma_for_width`). The separable Gaussian derivative filters are written as sums of
 shifted slices with folded symmetric/antisymmetric taps, reflect boundary, identical to
-`scipy.ndimage.gaussian_filter(..., order=..., mode="reflect", truncate=4.0)`.
+`scipy.ndimage.gaussian_filter(..., order=..., mode="reflect", truncate=4.0)`. The Hessian
+pads the image once in both axes and filters valid parts (`_filter_padded`): issue 13, the
+pipeline's tracking mode with MED in the bands 14.73 → 13.87 ms, the tracker's tracking
+mode 7.29 → 6.68 ms, `Tracker.step` 8.52 → 8.05 ms (experiments.ab_tracking against the
+per-pass padding, 300 interleaved frames each, load 4.4–6.9; outputs identical). Tried
+there and not kept (no gain beyond the noise on the 64×640 and 480×128 bands): the
+selection as one column maximum and one masked sum, 1/√ for `lax.rsqrt`, XLA's
+convolution (5.6 ms for the first pass alone), a banded matrix product (0.34 against
+0.18 ms).
 
 Strength threshold: a point is kept when −λ ≥ `threshold` × (the frame's largest −λ among
 geometrically valid ridge points), −λ ≥ `snr` × (mean |λ| over the frame, the noise level of
