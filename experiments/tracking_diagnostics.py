@@ -177,6 +177,34 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   1.98° from the shadow edge along the stripe), offset max 2 (7305 beside shadow 1.07 mm;
   7305 flank glare 1.46 mm on frame 0, the crossing on the bead's flank), offset mean 1
   (7305 beside shadow 0.39 mm), false T 1 (7305 flank glare frame 10).
+- the heading's covariance (issue 12; all 48 dev runs, each variant against the default in
+  one process; filter-only variants now reuse the default's pipeline outputs, ≈ 5× faster;
+  per kind offset mean / max averaged over the runs mm, heading mean °, and ``head_z_rms``,
+  the RMS of heading error / the filter's heading sd over the frames with a heading).
+  Default (window fused from 15 mm of span): clean 0.085 / 0.374 / 0.273 / 0.99, sunny
+  0.108 / 0.421 / 0.281 / 0.98, glare 0.101 / 0.456 / 0.315 / 1.02, shadow 0.115 / 0.493 /
+  0.439 / 1.39; 12 misses (heading 8), a heading on 79.7–80.4 % of the frames. On the
+  rendered runs the sd is not 3× too small on average (z RMS ≈ 1, shadow 1.4); on simulated
+  straight passes with the noise the filter assumes it is (frames 10–24: 1.83). Not kept:
+  fusing only the information the window gained since the last fused one
+  (`KalmanConfig.heading_gain_only`, simulated 1.83 → 1.21): 0.085 / 0.374 / 0.283 / 0.64,
+  0.109 / 0.421 / 0.281 / 0.56, 0.102 / 0.458 / 0.323 / 0.63, 0.117 / 0.493 / 0.468 / 0.90,
+  misses 12 (the same; floor 0.3 alike; with q_heading 0.001: 13, 7302 beside clean);
+  covariance intersection (ω minimising det P): offset mean sunny 0.143, glare 0.124 mm,
+  misses 14 (offset mean 1201 flank sunny / glare); a prior towards 0° (init_heading_std
+  2°, so a heading from frame 0): heading 0.60–0.75°, 39 misses; reporting a heading only
+  below 1.5° / 1° sd (`heading_valid_deg` 3°): misses 12 / 11 (heading on 76.6–78.3 % of
+  the frames), with the gain-only fusion 1° gave 9 misses but a heading on 72.4 % of sunny
+  frames (fewer frames reported, not a better heading; not adopted). Adopted: the window
+  fused only once it spans 22 mm (`KalmanConfig.heading_min_span_mm` 15 → 22; before that
+  the filter's own least-squares line through the same centres): clean 0.083 / 0.375 /
+  0.252 / 0.78, sunny 0.107 / 0.422 / 0.282 / 0.88, glare 0.101 / 0.456 / 0.291 / 0.84,
+  shadow 0.111 / 0.493 / 0.413 / 1.18; misses 12 → 7 (heading 8 → 3, none newly missed;
+  heading on 79.4–80.2 %). Spans 10 / 18 / 26 / 30 mm: misses 16 / 10 / 6 / 7 (30: 7305
+  beside clean newly missed). The 7 misses left: heading 7305 beside shadow 2.04° (the
+  shadow edge along the stripe), 7302 flank shadow 0.63°, 1202 beside shadow 0.51°; offset
+  max 7305 beside shadow 1.07 and 7305 flank glare 1.46 mm; offset mean 7305 beside shadow
+  0.387 mm; false T 7305 flank glare (1 frame). The closed loop (Figure 22) was not rerun.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

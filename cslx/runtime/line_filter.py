@@ -130,7 +130,21 @@ class KalmanConfig:
     # shadow beside 0.39 → 0.58°); without the width weights (tol 0) sun beside 1201 gave
     # 2.11° and sun on the flank 0.38°; a 90 mm window changed nothing; c = 2 was worse (3.98°)
     heading_window_mm: float = 60.0  # 0: off
-    heading_min_span_mm: float = 15.0
+    # 22 mm, not 15: over the window's first 15–22 mm (10–14 centres) its biweight line is
+    # noisier than the filter's own line through the same centres (the offset updates, least
+    # squares, no centre dropped; 10 centres over 15 mm, 0.3 mm noise: 1.01° against 0.89°,
+    # see `heading_tukey_refine`), and fused every frame it made the filter's heading sd too
+    # small there. 48 dev T approaches (experiments/tracking_diagnostics.py, one process; per
+    # kind offset mean / max averaged over the runs mm, heading mean °), 15 → 22 mm: clean
+    # 0.085 / 0.374 / 0.273 → 0.083 / 0.375 / 0.252, sunny 0.108 / 0.421 / 0.281 → 0.107 /
+    # 0.422 / 0.282, glare 0.101 / 0.456 / 0.315 → 0.101 / 0.456 / 0.291, shadow 0.115 /
+    # 0.493 / 0.439 → 0.111 / 0.493 / 0.413; runs missing a goal 12 → 7 (heading 8 → 3:
+    # 1201 flank sunny and glare, 1203 flank clean, 7302 flank sunny, 7305 flank glare now
+    # met; none newly missed); a heading on 80.4 → 80.2 % of the frames; RMS of heading
+    # error / the filter's sd 0.99–1.39 → 0.78–1.18 by kind. Other spans, misses (heading):
+    # 10 mm 16 (12), 18 mm 10 (6), 26 mm 6 (2; offset max sunny 0.424, clean 0.376 mm),
+    # 30 mm 7 (3; 7305 beside clean newly missed)
+    heading_min_span_mm: float = 22.0
     heading_tukey_c: float = 3.0
     # then 8 more iterations at the biweight's textbook cut-off 4.685 (95 % efficiency under
     # Gaussian noise) from the line c = 3 found (`robust_line`'s c_refine; 0: off): with the
@@ -148,8 +162,9 @@ class KalmanConfig:
     # Off (default): the window's heading is fused every frame as a new independent
     # measurement, although consecutive windows share all but one centre, so the filter's
     # heading sd is too small while the window is short (straight passes at 1.5 mm a frame,
-    # the noise `sigma_meas` assumes, frames 10–24: RMS of error / sd 1.83; with this 1.21,
-    # tests/runtime/test_path_heading.py). On: only the information the window gained since
+    # the noise `sigma_meas` assumes, frames 15–29: RMS of error / sd 1.56, with this 1.00;
+    # frames 10–24 with the window from 15 mm: 1.83 / 1.21; tests/runtime/
+    # test_path_heading.py). On: only the information the window gained since
     # the last fused one is fused (`WeldLineFilter.update_heading`'s gain: 1 / (R_prev +
     # q_heading² · travel since), R at most 1 / `heading_gain_floor` × the window's). 48 dev
     # T approaches (experiments/tracking_diagnostics.py, one process; per kind offset mean /
@@ -157,9 +172,10 @@ class KalmanConfig:
     # 0.374 / 0.273 / 0.99 → 0.085 / 0.374 / 0.283 / 0.64, sunny 0.108 / 0.421 / 0.281 /
     # 0.98 → 0.109 / 0.421 / 0.281 / 0.56, glare 0.101 / 0.456 / 0.315 / 1.02 → 0.102 /
     # 0.458 / 0.323 / 0.63, shadow 0.115 / 0.493 / 0.439 / 1.39 → 0.117 / 0.493 / 0.468 /
-    # 0.90; goal misses 12 → 12 (the same runs). On the rendered runs the default's sd is
-    # not too small on average (the bead's real errors are larger than `sigma_meas` at the
-    # confidence given) and this one is too large; the estimate is the window's either way.
+    # 0.90; goal misses 12 → 12 (the same runs; `heading_min_span_mm` 15). On the rendered
+    # runs the default's sd is not too small on average (the bead's real errors are larger
+    # than `sigma_meas` at the confidence given) and this one is too large; the estimate is
+    # the window's either way.
     # Not kept either: covariance intersection (P / ω, R / (1 − ω), ω minimising det P):
     # offset mean sunny 0.108 → 0.143, glare 0.101 → 0.124 mm, misses 12 → 14 (offset mean
     # 1201 flank sunny and glare); floor 0.3: heading 0.279 / 0.279 / 0.319 / 0.456°
