@@ -195,16 +195,19 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   2°, so a heading from frame 0): heading 0.60–0.75°, 39 misses; reporting a heading only
   below 1.5° / 1° sd (`heading_valid_deg` 3°): misses 12 / 11 (heading on 76.6–78.3 % of
   the frames), with the gain-only fusion 1° gave 9 misses but a heading on 72.4 % of sunny
-  frames (fewer frames reported, not a better heading; not adopted). Adopted: the window
+  frames (fewer frames reported, not a better heading; not adopted). Not adopted: the window
   fused only once it spans 22 mm (`KalmanConfig.heading_min_span_mm` 15 → 22; before that
   the filter's own least-squares line through the same centres): clean 0.083 / 0.375 /
   0.252 / 0.78, sunny 0.107 / 0.422 / 0.282 / 0.88, glare 0.101 / 0.456 / 0.291 / 0.84,
   shadow 0.111 / 0.493 / 0.413 / 1.18; misses 12 → 7 (heading 8 → 3, none newly missed;
   heading on 79.4–80.2 %). Spans 10 / 18 / 26 / 30 mm: misses 16 / 10 / 6 / 7 (30: 7305
-  beside clean newly missed). The 7 misses left: heading 7305 beside shadow 2.04° (the
-  shadow edge along the stripe), 7302 flank shadow 0.63°, 1202 beside shadow 0.51°; offset
-  max 7305 beside shadow 1.07 and 7305 flank glare 1.46 mm; offset mean 7305 beside shadow
-  0.387 mm; false T 7305 flank glare (1 frame). The closed loop (Figure 22) was not rerun.
+  beside clean newly missed). With 22 mm the 7 misses left: heading 7305 beside shadow
+  2.04° (the shadow edge along the stripe), 7302 flank shadow 0.63°, 1202 beside shadow
+  0.51°; offset max 7305 beside shadow 1.07 and 7305 flank glare 1.46 mm; offset mean 7305
+  beside shadow 0.387 mm; false T 7305 flank glare (1 frame). But Figure 22's closed loop
+  (dev seed 2201) got worse: sunny steady error mean 0.182 → 0.346 mm (after the turn
+  0.209 → 0.429, estimation error mean / max 0.081 / 0.26 → 0.272 / 1.75 mm), clean 0.194 →
+  0.200 mm (max 0.623 → 0.732), so the default stays 15 mm until that is understood.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

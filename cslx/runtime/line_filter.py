@@ -130,21 +130,20 @@ class KalmanConfig:
     # shadow beside 0.39 → 0.58°); without the width weights (tol 0) sun beside 1201 gave
     # 2.11° and sun on the flank 0.38°; a 90 mm window changed nothing; c = 2 was worse (3.98°)
     heading_window_mm: float = 60.0  # 0: off
-    # 22 mm, not 15: over the window's first 15–22 mm (10–14 centres) its biweight line is
-    # noisier than the filter's own line through the same centres (the offset updates, least
-    # squares, no centre dropped; 10 centres over 15 mm, 0.3 mm noise: 1.01° against 0.89°,
-    # see `heading_tukey_refine`), and fused every frame it made the filter's heading sd too
-    # small there. 48 dev T approaches (experiments/tracking_diagnostics.py, one process; per
-    # kind offset mean / max averaged over the runs mm, heading mean °), 15 → 22 mm: clean
-    # 0.085 / 0.374 / 0.273 → 0.083 / 0.375 / 0.252, sunny 0.108 / 0.421 / 0.281 → 0.107 /
-    # 0.422 / 0.282, glare 0.101 / 0.456 / 0.315 → 0.101 / 0.456 / 0.291, shadow 0.115 /
-    # 0.493 / 0.439 → 0.111 / 0.493 / 0.413; runs missing a goal 12 → 7 (heading 8 → 3:
-    # 1201 flank sunny and glare, 1203 flank clean, 7302 flank sunny, 7305 flank glare now
-    # met; none newly missed); a heading on 80.4 → 80.2 % of the frames; RMS of heading
-    # error / the filter's sd 0.99–1.39 → 0.78–1.18 by kind. Other spans, misses (heading):
-    # 10 mm 16 (12), 18 mm 10 (6), 26 mm 6 (2; offset max sunny 0.424, clean 0.376 mm),
-    # 30 mm 7 (3; 7305 beside clean newly missed)
-    heading_min_span_mm: float = 22.0
+    # 22 mm instead (before, the filter's own least-squares line through the same centres;
+    # the window's biweight line through its first 10–14 centres is the noisier one): 48 dev
+    # T approaches (experiments/tracking_diagnostics.py, one process; per kind offset mean /
+    # max averaged over the runs mm, heading mean °), 15 → 22 mm: clean 0.085 / 0.374 /
+    # 0.273 → 0.083 / 0.375 / 0.252, sunny 0.108 / 0.421 / 0.281 → 0.107 / 0.422 / 0.282,
+    # glare 0.101 / 0.456 / 0.315 → 0.101 / 0.456 / 0.291, shadow 0.115 / 0.493 / 0.439 →
+    # 0.111 / 0.493 / 0.413; runs missing a goal 12 → 7 (heading 8 → 3, none newly missed;
+    # spans 10 / 18 / 26 / 30 mm: 16 / 10 / 6 / 7). Not adopted: Figure 22's closed loop
+    # (dev seed 2201, `experiments/fig22_tracking.py` settings) got worse, sunny steady
+    # error mean 0.182 → 0.346 mm, after the turn 0.209 → 0.429 mm, estimation error mean /
+    # max 0.081 / 0.26 → 0.272 / 1.75 mm; clean steady mean / max 0.194 / 0.623 → 0.200 /
+    # 0.732 mm (both turned). Where it goes wrong (after the re-acquisition on the crossing
+    # weld?) is the open step
+    heading_min_span_mm: float = 15.0
     heading_tukey_c: float = 3.0
     # then 8 more iterations at the biweight's textbook cut-off 4.685 (95 % efficiency under
     # Gaussian noise) from the line c = 3 found (`robust_line`'s c_refine; 0: off): with the
@@ -162,9 +161,8 @@ class KalmanConfig:
     # Off (default): the window's heading is fused every frame as a new independent
     # measurement, although consecutive windows share all but one centre, so the filter's
     # heading sd is too small while the window is short (straight passes at 1.5 mm a frame,
-    # the noise `sigma_meas` assumes, frames 15–29: RMS of error / sd 1.56, with this 1.00;
-    # frames 10–24 with the window from 15 mm: 1.83 / 1.21; tests/runtime/
-    # test_path_heading.py). On: only the information the window gained since
+    # the noise `sigma_meas` assumes, frames 10–24: RMS of error / sd 1.83, with this 1.21;
+    # tests/runtime/test_path_heading.py). On: only the information the window gained since
     # the last fused one is fused (`WeldLineFilter.update_heading`'s gain: 1 / (R_prev +
     # q_heading² · travel since), R at most 1 / `heading_gain_floor` × the window's). 48 dev
     # T approaches (experiments/tracking_diagnostics.py, one process; per kind offset mean /

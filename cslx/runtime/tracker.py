@@ -56,11 +56,10 @@ filter over s = (e, θ):
   lie on the weld line; a robust (Tukey-biweight) line through them, weighted by confidence
   and by how far each bead's width departs from their median width (a bead whose flank a
   glint hides is narrow or wide and off-centre), gives θ with its standard deviation, fused
-  as a heading measurement each frame once they span `heading_min_span_mm` (22 mm; before,
-  the filter's own line through the same centres). A straight weld has no lag this way
-  (odometry, not the filter's random walk, carries the past); the window is forgotten when
-  the filter restarts, and fused only on frames whose bead was accepted
-  (`cslx.runtime.path_heading` says why). Numbers in `KalmanConfig`.
+  as a heading measurement each frame. A straight weld has no lag this way (odometry, not
+  the filter's random walk, carries the past); the window is forgotten when the filter
+  restarts, and fused only on frames whose bead was accepted (`cslx.runtime.path_heading`
+  says why). Numbers in `KalmanConfig`.
 
 Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
 
