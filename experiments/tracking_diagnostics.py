@@ -207,7 +207,9 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   beside shadow 0.387 mm; false T 7305 flank glare (1 frame). But Figure 22's closed loop
   (dev seed 2201) got worse: sunny steady error mean 0.182 → 0.346 mm (after the turn
   0.209 → 0.429, estimation error mean / max 0.081 / 0.26 → 0.272 / 1.75 mm), clean 0.194 →
-  0.200 mm (max 0.623 → 0.732), so the default stays 15 mm until that is understood.
+  0.200 mm (max 0.623 → 0.732), glare 0.133 → 0.144 mm (max 0.649 → 0.817), shadow
+  0.188 → 0.087 mm (max 0.668 → 0.279), so the default stays 15 mm until that is
+  understood.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

@@ -140,8 +140,9 @@ class KalmanConfig:
     # spans 10 / 18 / 26 / 30 mm: 16 / 10 / 6 / 7). Not adopted: Figure 22's closed loop
     # (dev seed 2201, `experiments/fig22_tracking.py` settings) got worse, sunny steady
     # error mean 0.182 → 0.346 mm, after the turn 0.209 → 0.429 mm, estimation error mean /
-    # max 0.081 / 0.26 → 0.272 / 1.75 mm; clean steady mean / max 0.194 / 0.623 → 0.200 /
-    # 0.732 mm (both turned). Where it goes wrong (after the re-acquisition on the crossing
+    # max 0.081 / 0.26 → 0.272 / 1.75 mm; steady mean / max clean 0.194 / 0.623 → 0.200 /
+    # 0.732, glare 0.133 / 0.649 → 0.144 / 0.817, shadow 0.188 / 0.668 → 0.087 / 0.279 mm
+    # (all turned). Where it goes wrong (after the re-acquisition on the crossing
     # weld?) is the open step
     heading_min_span_mm: float = 15.0
     heading_tukey_c: float = 3.0
