@@ -61,10 +61,12 @@ class PathHeading:
     def reset(self) -> None:
         self.points = np.zeros((0, 4))
         self._restarts = 0
+        self._var = math.inf  # the last fused window's heading variance, rad², grown by travel
 
     def move(self, d: float, delta: float) -> None:
         if not len(self.points):
             return
+        self._var += self.c.q_heading**2 * abs(d)
         x, y = carry(self.points[:, 0], self.points[:, 1], d, delta)
         self.points = np.stack([x, y, *self.points[:, 2:].T], 1)
         self.points = self.points[self.points[:, 0] >= self.x_ref - self.c.heading_window_mm]
@@ -87,6 +89,7 @@ class PathHeading:
         if kf.restarts != self._restarts:  # a new weld or a re-acquisition: forget the old
             self._restarts = kf.restarts
             self.points = np.zeros((0, 4))
+            self._var = math.inf
         if not accepted:
             return NAN, NAN
         row = np.array([[x, y, max(confidence, 0.05), width]])
@@ -108,5 +111,6 @@ class PathHeading:
         )
         if not math.isfinite(th):
             return NAN, NAN
-        kf.update_heading(th, sd)
+        if kf.update_heading(th, sd, gain=1.0 / self._var if c.heading_gain_only else 0.0):
+            self._var = max(sd, math.radians(c.sigma_heading_floor_deg)) ** 2
         return math.degrees(th), math.degrees(sd)

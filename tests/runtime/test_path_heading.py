@@ -68,3 +68,37 @@ def test_restart_forgets_the_window():
     kf.restarts += 1
     path.update(kf, X_REF, 5.0, 0.6, 14.0, True)
     assert len(path.points) == 1
+
+
+def _heading_z(gain_only: bool, draws: int = 150, frames: int = 25) -> np.ndarray:
+    """(heading error / the filter's heading sd) on frames 10–24 of straight passes at a random
+    heading within ±3.5°, one bead a frame (1.5 mm apart) with the noise the filter assumes
+    (`sigma_meas` at confidence 1): the window's first 15–36 mm, where it is noisiest."""
+    import dataclasses
+
+    c = dataclasses.replace(KalmanConfig(), heading_gain_only=gain_only)
+    z = []
+    for s in range(draws):
+        rng = np.random.default_rng(s)
+        th, y0 = math.radians(rng.uniform(-3.5, 3.5)), rng.uniform(-3.0, 3.0)
+        kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
+        for k in range(frames):
+            if k:
+                kf.predict(1.5, 0.0)
+                path.move(1.5, 0.0)
+            y = y0 + math.tan(th) * 1.5 * k + rng.normal(0.0, c.sigma_meas)
+            ok = kf.update(X_REF, y, 1.0)
+            path.update(kf, X_REF, y, 1.0, 14.0, ok)
+            if k >= 10:
+                z.append((kf.x[1] - th) / math.sqrt(kf.P[1, 1]))
+    return np.asarray(z)
+
+
+def test_window_heading_sd_covers_the_error():
+    """Fusing only the information the window gained (`heading_gain_only`) leaves a heading
+    sd that covers the error (RMS of error / sd 1.21); fused as a new independent measurement
+    every frame (the default) the window's shared centres are counted again and again and
+    the sd is too small (RMS 1.83)."""
+    rms = {m: float(np.sqrt(np.mean(_heading_z(m) ** 2))) for m in (False, True)}
+    assert rms[False] > 1.5, rms
+    assert 0.8 < rms[True] < 1.3, rms
