@@ -124,6 +124,10 @@ class RobotLink:
             log.debug("cannot open %s: %s", self.port, e)
             return False
         with self._io_lock:
+            if reconnect:
+                # counted before `connected` turns true, so a reader never sees the link
+                # back up with the reconnect not yet counted
+                self.stats["reconnects"] += 1
             self._ser = ser
             self._decoder.reset()
             if reconnect:
@@ -323,7 +327,6 @@ class RobotLink:
             ser = self._ser
             if ser is None:
                 if self._connect(reconnect=True):
-                    self.stats["reconnects"] += 1
                     backoff = self.reconnect_min_s
                     log.warning("robot link %s re-established: STOP(LINK_ERROR) sent", self.port)
                     if self._tripped is not None:
