@@ -89,6 +89,8 @@ class RobotLink:
 
         self._ser = None
         self._io_lock = threading.RLock()  # guards _ser and writes
+        # set once a (re)connection is complete (its STOP written and recorded), cleared on loss
+        self._up = threading.Event()
         self._state_lock = threading.Lock()
         self._acked = threading.Condition(self._state_lock)
         self._seq = 0
@@ -124,19 +126,21 @@ class RobotLink:
             log.debug("cannot open %s: %s", self.port, e)
             return False
         with self._io_lock:
-            if reconnect:
-                # counted before `connected` turns true, so a reader never sees the link
-                # back up with the reconnect not yet counted
-                self.stats["reconnects"] += 1
             self._ser = ser
             self._decoder.reset()
             if reconnect:
+                self.stats["reconnects"] += 1
                 self.send_stop(StopReason.LINK_ERROR)
+            # last: a reader of `connected` sees the reconnect counted and its STOP recorded
+            # (unless writing the STOP already lost the port again)
+            if self._ser is ser:
+                self._up.set()
         return True
 
     def _drop(self, why: str) -> None:
         with self._io_lock:
             ser, self._ser = self._ser, None
+            self._up.clear()
         if ser is not None:
             self.stats["io_errors"] += 1
             log.warning("robot link %s lost: %s", self.port, why)
@@ -147,7 +151,8 @@ class RobotLink:
 
     @property
     def connected(self) -> bool:
-        return self._ser is not None
+        """The port is open and, after a loss, the reconnection is complete."""
+        return self._up.is_set()
 
     def open(self) -> RobotLink:
         """Open the port (raises OSError if it cannot be opened now) and start the threads."""
@@ -178,6 +183,7 @@ class RobotLink:
         self._threads = []
         with self._io_lock:
             ser, self._ser = self._ser, None
+            self._up.clear()
         if ser is not None:
             try:
                 ser.close()
