@@ -175,11 +175,25 @@ PRECISION_POWER = 0.5
 PRECISION_CAP = 10.0
 
 
-@functools.partial(jax.jit, static_argnames=("sigma", "axis"))
-def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: int):
+@functools.partial(jax.jit, static_argnames=("sigma", "axis", "sigma_along"))
+def second_pass(
+    mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: int, sigma_along=None
+):
     """Second pass of the linked detector (`cslx.segmentation.robust`, step 7): centres
     re-measured along the first pass's smoothed path (`refine_centres`), then smoothed
-    again (`path.smooth_path`, with one-sided windows).
+    again (`path.smooth_path`, with one-sided windows). `sigma_along` is the along-path σ
+    (px) of the re-measurement and of the fit's average; None: `SIGMA_REFINE`
+    (`robust.REFINE_PASSES` runs the pass more than once with other σ).
+
+    The re-measurement returns p + G∗(c − p) (p the path it is given, c the truth, G the
+    along-path Gaussian), so its error is −(I − G)(c − p): the part of the given path's
+    error narrower than G passes whole — at the bead's toes, the first pass's rounding of
+    the kink (see `robust.REFINE_PASSES` for what re-running the pass does). The metric is
+    not the cause (issue 11): on the development frames (seeds 7100–7117, frames 0–1) the
+    distance of each triangulated centre to the true 3-D stripe (a polyline through the
+    ground-truth points) instead of to the ground-truth point of its column gives H / V
+    median 0.0294 / 0.0309 mm, p95 0.131 / 0.140 against 0.0300 / 0.0313, 0.135 / 0.144:
+    the stripe's slope in the image stretches the per-column error by ≤ 3 %.
 
     Bridged centres keep the first pass's line. No border margin: the smoothing along the
     path is normalised over the centres it has, so it does not mirror the image at the
@@ -390,6 +404,7 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
       second-order effect of the estimators under multiplicative noise, presumably). Open:
       an estimator unbiased under multiplicative noise of a skewed profile.
     """
+    sa = SIGMA_REFINE if sigma_along is None else float(sigma_along)
     use = valid & ~bridged
     fitted, prec = None, None
     if PROFILE_FIT or PRECISION_WEIGHTS:  # one profile fit for both
@@ -402,11 +417,9 @@ def second_pass(mono, pos, valid, bridged, clipped=None, *, sigma: float, axis: 
         unclipped = _clipped_near(excl, pos, sigma=sigma, axis=axis) <= FIT_MAX_CLIPPED
         prec = _precision(fitted, use, unclipped)
     # refine_centres keeps `pos` wherever `use` is False or nothing was found
-    new, _ = refine_centres(
-        mono, pos, use, sigma=sigma, sigma_along=SIGMA_REFINE, axis=axis, precision=prec
-    )
+    new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=sa, axis=axis, precision=prec)
     if PROFILE_FIT:
-        new = _fitted(mono, pos, use, new, clipped, fitted, sigma=sigma, axis=axis)
+        new = _fitted(mono, pos, use, new, clipped, fitted, sigma=sigma, axis=axis, sigma_along=sa)
     scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
     smoothed, _ = smooth_path(
         jnp.nan_to_num(new),
@@ -448,11 +461,14 @@ def _precision(fitted, use, unclipped):
     return jnp.minimum(prec, PRECISION_CAP) ** PRECISION_POWER
 
 
-def _fitted(mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, axis: int):
+def _fitted(
+    mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, axis: int, sigma_along=None
+):
     """The profile fit's centres averaged along the path (`SIGMA_REFINE`), where the fit
     holds (`FIT_CHI2`, `FIT_SHARE`, `FIT_BORDER`, `FIT_MAX_CLIPPED`); their mean with
     `derivative` (the centres of `refine_centres`, weights `BLEND`) where it holds with up
     to `BLEND_MAX_CLIPPED` clipped pixels; `derivative` elsewhere. See `second_pass`."""
+    sa = SIGMA_REFINE if sigma_along is None else float(sigma_along)
     excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
     if fitted is None:
         half = int(math.ceil(REACH + 4 * sigma))
@@ -467,10 +483,10 @@ def _fitted(mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, a
     if FIT_RELATIVE:
         # average the fitted offsets from the path, not the positions (see FIT_RELATIVE)
         base = jnp.nan_to_num(pos)
-        off, den = _along(jnp.nan_to_num(fit) - base, found.astype(dtype), SIGMA_REFINE)
+        off, den = _along(jnp.nan_to_num(fit) - base, found.astype(dtype), sa)
         mean = base + off
     else:
-        mean, den = _along(jnp.nan_to_num(fit), found.astype(dtype), SIGMA_REFINE)
+        mean, den = _along(jnp.nan_to_num(fit), found.astype(dtype), sa)
     n = pos.shape[0]
     j = jnp.arange(n)
     first = jnp.min(jnp.where(use, j, n))
@@ -479,7 +495,7 @@ def _fitted(mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, a
 
     def holds_within(most_clipped: int):
         holds = found & (chi2 < FIT_CHI2) & (n_clipped <= most_clipped)
-        good, _ = _along(holds.astype(dtype), use.astype(dtype), SIGMA_REFINE)
+        good, _ = _along(holds.astype(dtype), use.astype(dtype), sa)
         return use & (den > 1e-6) & (good > FIT_SHARE) & inner
 
     blend = jnp.where(

@@ -429,7 +429,11 @@ def linked_extract(
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
     if REFINE:
-        pos = second_pass(mono2, pos, valid, bridged, filled | blind, sigma=final, axis=axis)
+        unusable = filled | blind
+        for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
+            pos = second_pass(
+                mono2, pos, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
+            )
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )
@@ -470,6 +474,29 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
+#: Along-path σ (px) of each re-measurement of step 7, in order; None is
+#: `refine.SIGMA_REFINE`. One pass by default. Why more were tried (issue 11, the toes):
+#: `refine_centres` returns p + G∗(c − p) for a reference path p, so its error is
+#: −(I − G)(c − p): a first-pass error narrower than G — the bead toes' rounding by the 6 px
+#: smoothing along the image axis, a kink of slope change 0.2 rounded by ≈ 0.2·6/√(2π) ≈
+#: 0.5 px — passes almost whole (`tests/segmentation/test_refine.py`: 0.119 → 0.111 px at a
+#: bend with G 6 px, 0.052 px with G 2 px). A second pass around the first's output, a short
+#: G first, attacks that. Development frames (seeds 7100–7117, frames 0–1, 36 frames; H / V
+#: median / p95 mm, detection 100 / 99.90 % throughout) — one pass (default): 0.0300 /
+#: 0.135, 0.0313 / 0.144, gross 0.02 / 0.06 %; (6, 6): 0.0299 / 0.131, 0.0311 / 0.144,
+#: gross 0.03 / 0.08 %; (2, 6): 0.0300 / 0.131, 0.0308 / 0.145, gross 0.06 / 0.06 % (toes
+#: p95 0.347 / 0.322 → 0.283 / 0.278 mm but caps H 0.249 → 0.334: the short pass follows
+#: glints on the bead); (2, 6) with the short pass's path used only where it leaves the
+#: first pass's by > 3 robust std: 0.0298 / 0.132, 0.0309 / 0.143, gross 0.06 / 0.06 %;
+#: (3, 6): 0.0297 / 0.128, 0.0308 / 0.143, gross 0.03 / 0.06 % (V sunny p95 0.249 → 0.225,
+#: H clean median 0.025 → 0.026). On fresh development frames (frame 2, 18 frames), (3, 6)
+#: against one pass: H 0.0290 / 0.140 → 0.0297 / 0.137, V 0.0358 / 0.152 → 0.0358 / 0.149,
+#: V gross 0 → 0.05 % (printed). A 2 % gain in the p95 with a worse H median, more gross
+#: centres and one more second pass (its profile fit ≈ 15 ms per frame and stripe), so
+#: the default stays one pass. A smaller σ in the only pass (`SIGMA_REFINE` 4): 0.0314 /
+#: 0.138, 0.0308 / 0.150; `SIGMA_ALONG` 4 in the first pass: 0.0299 / 0.136, 0.0311 /
+#: 0.142, H detection 99.97 %.
+REFINE_PASSES = (None,)
 
 
 #: Longest stretch (px) of a stripe hidden by clipped pixels that is bridged.

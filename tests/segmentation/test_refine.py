@@ -148,3 +148,64 @@ def test_printed_target_centres_weighted_by_their_precision(monkeypatch):
     assert np.median(plain) > 0.042 and np.median(weighted) < 0.036
     assert np.percentile(plain, 95) > 0.21 and np.percentile(weighted, 95) < 0.2
     assert plain.max() > 0.9 and weighted.max() < 0.5
+
+
+def _rounded(truth, sigma_along=6.0):
+    """The truth smoothed along the path by a Gaussian of `sigma_along` centres (ends held):
+    a first pass that rounds the bend, as the linked detector's smoothing along the image
+    axis does at a bead's toe."""
+    r = int(np.ceil(4 * sigma_along))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma_along) ** 2)
+    padded = np.pad(truth, r, mode="edge")
+    return np.convolve(padded, k / k.sum(), mode="valid")
+
+
+def test_a_rounded_first_pass_leaks_through_the_along_path_average():
+    """`refine_centres` averages the profiles at the same offset from the first pass's path,
+    so the new centre is p + G∗(c − p): its error is −(I − G)(c − p), and a first-pass error
+    narrower than the along-path Gaussian G (the rounding of a bend) is hardly reduced
+    (`SIGMA_REFINE` 6 px); a short G (2 px) removes most of it. Why `robust.REFINE_PASSES`
+    and `second_pass(sigma_along=...)` exist (issue 11, the toes' error)."""
+    image, truth = _curved()
+    start = _rounded(truth)
+    valid = jnp.ones(len(truth), bool)
+    bend = slice(214, 227)  # the bend at u = 220
+    plate = slice(40, 180)
+
+    def error(sigma_along):
+        pos, found = refine_centres(
+            jnp.asarray(image), jnp.asarray(start, jnp.float32), valid, sigma=2.5,
+            sigma_along=sigma_along, axis=0,
+        )  # fmt: skip
+        assert np.asarray(found).all()
+        return np.abs(np.asarray(pos) - truth)
+
+    e0 = np.abs(start - truth)[bend].max()
+    assert e0 > 0.1
+    long, short = error(6.0), error(2.0)
+    assert long[bend].max() > 0.8 * e0
+    assert short[bend].max() < 0.6 * e0
+    # away from the bend both follow the parabola (no chord bias)
+    assert long[plate].max() < 0.02 and short[plate].max() < 0.02
+
+
+def test_second_pass_sigma_along_defaults_to_sigma_refine():
+    from cslx.segmentation.refine import SIGMA_REFINE, second_pass
+
+    image, truth = _curved()
+    image = image + np.random.default_rng(0).normal(0.0, 3.0, image.shape).astype(np.float32)
+    start = jnp.asarray(_rounded(truth), jnp.float32)
+    valid = jnp.ones(len(truth), bool)
+    none = jnp.zeros(len(truth), bool)
+
+    def run(sigma_along):
+        return np.asarray(
+            second_pass(
+                jnp.asarray(image), start, valid, none, sigma=2.5, axis=0,
+                sigma_along=sigma_along,
+            )
+        )  # fmt: skip
+
+    default = run(None)
+    np.testing.assert_array_equal(default, run(SIGMA_REFINE))
+    assert np.abs(run(2.0) - default).max() > 1e-3
