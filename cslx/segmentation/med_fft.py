@@ -105,9 +105,22 @@ def _split(Z, n):
 
 
 def _segment_sums(B, L, m):
-    """Centred output and per-segment energy U (eq. (23)) and 4th power sums."""
-    B = B[:, : m + L - 1]
-    b = B - jnp.mean(B, axis=-1, keepdims=True)
+    """Centred output and per-segment energy U (eq. (23)) and 4th power sums.
+
+    B holds the n ≥ m + L − 1 samples of the circular convolution; only the first m + L − 1
+    are the full convolution. They are selected with a mask, not a slice: the centred
+    output keeps all n samples, zero past m + L − 1, so the cube of `update` needs no pad
+    before its FFT, and the (p, m + L − 1) complex slice, which XLA's CPU backend copied out
+    in a kernel of its own, goes (issue 13; the same values to float32 rounding: the sums
+    run over n samples, the last n − m − L + 1 of them zero).
+    """
+    n, mL = B.shape[-1], m + L - 1
+    if n == mL:
+        b = B - jnp.mean(B, axis=-1, keepdims=True)
+    else:
+        keep = jnp.arange(n) < mL
+        mean = jnp.sum(jnp.where(keep, B, 0), axis=-1, keepdims=True) / mL
+        b = jnp.where(keep, B - mean, 0)
     ba, bb = b.real, b.imag
     ba2, bb2 = ba * ba, bb * bb
     U = jnp.concatenate([jnp.sum(ba2, -1), jnp.sum(bb2, -1)])
@@ -122,8 +135,8 @@ class Stats(eqx.Module):
     excess: Float[Array, ""]  # mean sample excess kurtosis over non-constant segments
     w: Float[Array, " s2"]  # R weights k_j / U_j (eq. (22), left)
     v: Float[Array, " s2"]  # b weights 1 / U_j² (eq. (22), right)
-    ba: Float[Array, "p mf"]
-    bb: Float[Array, "p mf"]
+    ba: Float[Array, "p n"]  # centred output, zero past the full convolution (m + L − 1)
+    bb: Float[Array, "p n"]
 
 
 def filter_spectrum(W: Float[Array, " L"], n: int) -> Complex[Array, " n"]:
@@ -365,6 +378,7 @@ def ridge_delay(W, st: Stats, sign, d0, pb: Problem, sigma: float, window: float
     # ridge search costs as much as a Steger pass on the band when run on all of them.
     step = max(1, pb.s // RIDGE_SEGMENTS)
     B = jnp.stack([st.ba, st.bb], axis=1).reshape(-1, st.ba.shape[-1])[: pb.s : step]
+    B = B[:, : pb.m + pb.L - 1]  # the full convolution (`_segment_sums` keeps n samples)
     pX, okX = ridge_positions(pb.X[::step], sigma)
     pB, okB = ridge_positions(sign * B, sigma)
     diff = pB - pX

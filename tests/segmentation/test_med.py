@@ -478,6 +478,35 @@ def test_odd_linear_phase_output_is_the_shifted_convolution(axis, L):
         med_fft.centre_output(st, 1.0, med_prepare(I, axis=axis, L=L + 1))
 
 
+@pytest.mark.parametrize("m, L", [(64, 16), (128, 16), (40, 10)])
+def test_stats_is_the_full_convolution_s_statistics(m, L):
+    """Issue 13: `med_fft.stats` selects the full convolution (m + L − 1 of the n FFT
+    samples) with a mask, not a slice. Against the direct convolution in NumPy: the
+    centred outputs (zero past m + L − 1), U_j, the weights of eq. (22) and the kurtosis."""
+    n_seg = 7
+    I = stripe_image(m, n_seg, np.full(n_seg, m / 2.3), speckle=0.3, seed=5)
+    pb = med_prepare(jnp.asarray(I), axis=0, L=L)
+    assert pb.n > m + L - 1  # the mask selects part of the FFT length
+    W = np.random.default_rng(1).normal(size=L)
+    W /= np.linalg.norm(W)
+    st = med_fft.stats(jnp.asarray(W), pb)
+    X = np.asarray(pb.X)
+    B = np.stack([np.convolve(x, W) for x in X])  # (s, m + L − 1), the full convolution
+    b = B - B.mean(axis=1, keepdims=True)
+    U, F = (b**2).sum(1), (b**4).sum(1)
+    k = F / U**2
+    got = np.stack([np.asarray(st.ba), np.asarray(st.bb)], 1).reshape(-1, pb.n)[:n_seg]
+    np.testing.assert_allclose(got[:, : m + L - 1], b, atol=1e-10 * np.abs(b).max())
+    assert np.all(got[:, m + L - 1 :] == 0)
+    p = pb.Z.shape[0]  # the weights list the even segments, then the odd ones
+    order = np.r_[np.arange(0, n_seg, 2), np.arange(1, n_seg, 2)]
+    live = np.r_[np.arange(p), p + np.arange(n_seg // 2)]
+    np.testing.assert_allclose(np.asarray(st.w)[live], (k / U)[order], rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(st.v)[live], (1 / U**2)[order], rtol=1e-9)
+    np.testing.assert_allclose(float(st.ratio_sum), k.sum(), rtol=1e-9)
+    np.testing.assert_allclose(float(st.excess), np.mean((m + L - 1) * k - 3), rtol=1e-9)
+
+
 # ---------------------------------------------------------------- dtypes and errors
 
 
