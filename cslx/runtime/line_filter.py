@@ -108,6 +108,14 @@ class KalmanConfig:
     # Dev seeds 1201 + 1202 (16 passes): all 419 sightings within 3 mm of the truth were
     # ≥ 1.01 mm high; 25 false sightings were lower (0.8 let them through).
     junction_min_height_mm: float = 1.0
+    # A crossing bead cut by the far end of the vertical stripe's view is no sighting: its
+    # far toe (x + width / 2, both as measured) within this of the stripe's measured far end
+    # (`Tracker._junction`; < 0: off). Its centre is then the visible part's: dev seed 7305,
+    # flank, glare, frames 9–10, the bar's centre 221 / 220 mm beyond the view's end at
+    # 219.4 mm, sightings at 209.7 / 211.0 mm (far toes 219.3 / 218.6 mm) confirmed a T 10 mm
+    # short (the dev runs' one false T frame); once the whole bar was in view (frame 19 on)
+    # its far toe lay ≥ 2 mm inside the end.
+    junction_cut_margin_mm: float = 1.0
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
     # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
     # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to
