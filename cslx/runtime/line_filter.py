@@ -114,8 +114,13 @@ class KalmanConfig:
     # flank, glare, frames 9–10, the bar's centre 221 / 220 mm beyond the view's end at
     # 219.4 mm, sightings at 209.7 / 211.0 mm (far toes 219.3 / 218.6 mm) confirmed a T 10 mm
     # short (the dev runs' one false T frame); once the whole bar was in view (frame 19 on)
-    # its far toe lay ≥ 2 mm inside the end.
-    junction_cut_margin_mm: float = 1.0
+    # its far toe lay ≥ 2 mm inside the end. Off by default: 48 dev runs (one process, with
+    # `heading_min_span_mm` 22), margin 1 mm against off: that false T gone, but 7301 flank
+    # glare newly missed the T goals (1 false T frame, recall 86.2 %), runs missing a goal
+    # 7 → 8, every other score identical; Figure 22 (dev seed 2201) clean, sunny, shadow
+    # identical, glare steady error mean / max 0.087 / 0.296 → 0.238 / 1.204 mm (the turn's
+    # end position: the last reports before the coast to the T changed)
+    junction_cut_margin_mm: float = -1.0
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
     # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
     # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to
@@ -205,7 +210,10 @@ class KalmanConfig:
     # below the bead's real error). `heading_max_sd_deg` > 0: fuse only once σ_pred ≤ this,
     # a span requirement that follows the centres' confidence and spacing instead of a fixed
     # `heading_min_span_mm` (at 1.5 mm a centre, confidence 0.6: 15 mm ↔ 1.9°, 22 mm ↔
-    # 1.07°, 30 mm ↔ 0.67°). Both off by default (numbers in `PathHeading`'s docstring).
+    # 1.07°, 30 mm ↔ 0.67°). Both off: on the 48 dev runs the model sd changed the heading
+    # error by ≤ 0.004° a kind and no goal (the sd then too large, RMS error / sd 0.92 →
+    # 0.63); 1.0 / 1.2° from a 6 mm floor on 7302 + 7305 (16 runs): the 22 mm span's misses,
+    # heading within 0.02° a kind (experiments/tracking_diagnostics.py).
     heading_sd_model: bool = False
     heading_max_sd_deg: float = 0.0
 

@@ -1,4 +1,4 @@
-"""A crossing bead cut by the far end of the vertical stripe's view is no sighting
+"""Opt-in: a crossing bead cut by the far end of the vertical stripe's view is no sighting
 (`KalmanConfig.junction_cut_margin_mm`, `Tracker._junction`)."""
 
 import dataclasses
