@@ -244,7 +244,12 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   (far toes 219.3 / 218.6 mm), which confirmed a T 10 mm short. Dropping sightings whose far
   toe lies within 1 mm of the stripe's end (`KalmanConfig.junction_cut_margin_mm`, opt-in)
   removed it but cost 7301 flank glare (a false T frame and recall 86.2 %; misses 7 → 8)
-  and Figure 22 glare at 2201 (steady mean 0.087 → 0.238 mm); not adopted.
+  and Figure 22 glare at 2201 (steady mean 0.087 → 0.238 mm); not adopted. In 7301 flank
+  glare the bar's sightings while it was still partly beyond the end (frames 16–18, far
+  toes 218.8–219.4 mm against an end at 219.3–219.7) were within 0.5 mm of the truth, and
+  without them the first two left (frames 19–20, measured 25–28 mm wide for an 18 mm bar,
+  4 mm short) confirmed the T 3.0 mm short; the measured width does not tell a cut bead
+  from a whole one, so a rule on it is the open step.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
