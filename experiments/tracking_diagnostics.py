@@ -208,8 +208,48 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   (dev seed 2201) got worse: sunny steady error mean 0.182 → 0.346 mm (after the turn
   0.209 → 0.429, estimation error mean / max 0.081 / 0.26 → 0.272 / 1.75 mm), clean 0.194 →
   0.200 mm (max 0.623 → 0.732), glare 0.133 → 0.144 mm (max 0.649 → 0.817), shadow
-  0.188 → 0.087 mm (max 0.668 → 0.279), so the default stays 15 mm until that is
+  0.188 → 0.087 mm (max 0.668 → 0.279), so the default stayed 15 mm until that was
   understood.
+- why the 22 mm span seemed to cost Figure 22 (dev seed 2201; per-frame logs of both spans,
+  the filter's state on every frame): not through the heading. The tracker's own error is
+  the same (estimation error mean / max 15 → 22 mm: clean 0.088 / 0.263 → 0.109 / 0.270,
+  sunny 0.092 / 0.299 → 0.092 / 0.246, glare 0.067 / 0.195 → 0.069 / 0.195, shadow
+  0.096 / 0.288 → 0.091 / 0.261 mm). The steady error's max, and much of its mean, is the
+  first frame after the in-place turn at the T (0.01–1.23 mm over the 8 runs), i.e. where
+  the robot ends the turn: set by the junction reports made 150–210 mm ahead (frames
+  14–61) and dead-reckoned through ≈ 100 frames of coasting (sunny: last report 0.72 mm
+  vs 1.58 mm along the stem, the robot stopped at −0.94 vs 0.00 mm, first error after the
+  turn 1.23 vs 0.16 mm). Runs with equal settings diverge from the first frame whose
+  numbers differ, so any change (the span; fba7745's float32 padding alone moved sunny 15
+  mm from 0.182 to 0.249 mm) moves that by up to ±1 mm. Today's code, steady mean / max 15
+  → 22 mm (all turned): clean 0.143 / 0.676 → 0.121 / 0.239, sunny 0.249 / 1.225 → 0.113 /
+  0.259, glare 0.116 / 0.349 → 0.087 / 0.296, shadow 0.210 / 0.880 → 0.220 / 0.936 mm.
+  `heading_min_span_mm` is now 22. All 48 dev runs at today's code, one process (per kind
+  offset mean / max averaged over the runs mm, heading mean °; runs missing a goal): 15 mm:
+  clean 0.085 / 0.374 / 0.273, sunny 0.108 / 0.421 / 0.281, glare 0.101 / 0.456 / 0.315,
+  shadow 0.115 / 0.493 / 0.439, 12 misses (heading 8: 7302 flank sunny and shadow, 7305
+  beside shadow, 7305 flank glare, 1201 flank sunny and glare, 1202 beside shadow, 1203
+  flank clean); 22 mm: 0.083 / 0.375 / 0.252, 0.107 / 0.422 / 0.282, 0.101 / 0.456 /
+  0.291, 0.111 / 0.493 / 0.413, 7 misses (heading 3: 7302 flank shadow 0.63°, 7305
+  beside shadow 2.04°, 1202 beside shadow 0.51°; offset max 7305 beside shadow 1.07,
+  7305 flank glare 1.46 mm; offset mean 7305 beside shadow 0.387 mm; false T 7305 flank
+  glare). Not kept: the window's sd floored at the measurement model's prediction
+  (`KalmanConfig.heading_sd_model`): heading 0.252 / 0.278 / 0.289 / 0.413°, misses 8
+  (the same 7 plus 7301 flank glare's T recall 86.2 % and a false T frame, with the cut
+  rule below on in that run; head_z_rms 0.92 → 0.63, i.e. an sd now too large); a span set
+  by the predicted sd (`heading_max_sd_deg` 1.0 / 1.2°, span floor 6 mm), 16 runs of
+  7302 + 7305: misses 6 / 6 as with 22 mm, heading per kind within 0.02°.
+- the false T (7305 flank glare, frame 10): the bar's centre 220 mm, beyond the vertical
+  stripe's measured end (219.4 mm); its visible part gave sightings at 209.7 and 211.0 mm
+  (far toes 219.3 / 218.6 mm), which confirmed a T 10 mm short. Dropping sightings whose far
+  toe lies within 1 mm of the stripe's end (`KalmanConfig.junction_cut_margin_mm`, opt-in)
+  removed it but cost 7301 flank glare (a false T frame and recall 86.2 %; misses 7 → 8)
+  and Figure 22 glare at 2201 (steady mean 0.087 → 0.238 mm); not adopted. In 7301 flank
+  glare the bar's sightings while it was still partly beyond the end (frames 16–18, far
+  toes 218.8–219.4 mm against an end at 219.3–219.7) were within 0.5 mm of the truth, and
+  without them the first two left (frames 19–20, measured 25–28 mm wide for an 18 mm bar,
+  4 mm short) confirmed the T 3.0 mm short; the measured width does not tell a cut bead
+  from a whole one, so a rule on it is the open step.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]

@@ -53,7 +53,15 @@ import numpy as np
 
 from .line_filter import carry
 
-__all__ = ["JunctionTrack"]
+__all__ = ["JunctionTrack", "cut_by_view"]
+
+
+def cut_by_view(x: float, width: float, extent: tuple | None, margin: float) -> bool:
+    """True if a crossing bead at x of this width (both as measured) reaches within `margin`
+    of the far end of the vertical stripe's measured extent: cut by the view, its measured
+    centre is the visible part's, not the weld's (`KalmanConfig.junction_cut_margin_mm`;
+    margin < 0: never)."""
+    return extent is not None and margin >= 0 and x + 0.5 * width >= extent[1] - margin
 
 
 class JunctionTrack:

@@ -108,6 +108,19 @@ class KalmanConfig:
     # Dev seeds 1201 + 1202 (16 passes): all 419 sightings within 3 mm of the truth were
     # ≥ 1.01 mm high; 25 false sightings were lower (0.8 let them through).
     junction_min_height_mm: float = 1.0
+    # A crossing bead cut by the far end of the vertical stripe's view is no sighting: its
+    # far toe (x + width / 2, both as measured) within this of the stripe's measured far end
+    # (`Tracker._junction`; < 0: off). Its centre is then the visible part's: dev seed 7305,
+    # flank, glare, frames 9–10, the bar's centre 221 / 220 mm beyond the view's end at
+    # 219.4 mm, sightings at 209.7 / 211.0 mm (far toes 219.3 / 218.6 mm) confirmed a T 10 mm
+    # short (the dev runs' one false T frame); once the whole bar was in view (frame 19 on)
+    # its far toe lay ≥ 2 mm inside the end. Off by default: 48 dev runs (one process, with
+    # `heading_min_span_mm` 22), margin 1 mm against off: that false T gone, but 7301 flank
+    # glare newly missed the T goals (1 false T frame, recall 86.2 %), runs missing a goal
+    # 7 → 8, every other score identical; Figure 22 (dev seed 2201) clean, sunny, shadow
+    # identical, glare steady error mean / max 0.087 / 0.296 → 0.238 / 1.204 mm (the turn's
+    # end position: the last reports before the coast to the T changed)
+    junction_cut_margin_mm: float = -1.0
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
     # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
     # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to
@@ -130,21 +143,29 @@ class KalmanConfig:
     # shadow beside 0.39 → 0.58°); without the width weights (tol 0) sun beside 1201 gave
     # 2.11° and sun on the flank 0.38°; a 90 mm window changed nothing; c = 2 was worse (3.98°)
     heading_window_mm: float = 60.0  # 0: off
-    # 22 mm instead (before, the filter's own least-squares line through the same centres;
+    # 22 mm, not 15 (before, the filter's own least-squares line through the same centres;
     # the window's biweight line through its first 10–14 centres is the noisier one): 48 dev
-    # T approaches (experiments/tracking_diagnostics.py, one process; per kind offset mean /
-    # max averaged over the runs mm, heading mean °), 15 → 22 mm: clean 0.085 / 0.374 /
-    # 0.273 → 0.083 / 0.375 / 0.252, sunny 0.108 / 0.421 / 0.281 → 0.107 / 0.422 / 0.282,
-    # glare 0.101 / 0.456 / 0.315 → 0.101 / 0.456 / 0.291, shadow 0.115 / 0.493 / 0.439 →
-    # 0.111 / 0.493 / 0.413; runs missing a goal 12 → 7 (heading 8 → 3, none newly missed;
-    # spans 10 / 18 / 26 / 30 mm: 16 / 10 / 6 / 7). Not adopted: Figure 22's closed loop
-    # (dev seed 2201, `experiments/fig22_tracking.py` settings) got worse, sunny steady
-    # error mean 0.182 → 0.346 mm, after the turn 0.209 → 0.429 mm, estimation error mean /
-    # max 0.081 / 0.26 → 0.272 / 1.75 mm; steady mean / max clean 0.194 / 0.623 → 0.200 /
-    # 0.732, glare 0.133 / 0.649 → 0.144 / 0.817, shadow 0.188 / 0.668 → 0.087 / 0.279 mm
-    # (all turned). Where it goes wrong (after the re-acquisition on the crossing
-    # weld?) is the open step
-    heading_min_span_mm: float = 15.0
+    # T approaches (experiments/tracking_diagnostics.py, one process, at 1592fef; per kind
+    # offset mean / max averaged over the runs mm, heading mean °), 15 → 22 mm: clean 0.085
+    # / 0.374 / 0.273 → 0.083 / 0.375 / 0.252, sunny 0.108 / 0.421 / 0.281 → 0.107 / 0.422
+    # / 0.282, glare 0.101 / 0.456 / 0.315 → 0.101 / 0.456 / 0.291, shadow 0.115 / 0.493 /
+    # 0.439 → 0.111 / 0.493 / 0.413; runs missing a goal 12 → 7 (heading 8 → 3, none newly
+    # missed; spans 10 / 18 / 26 / 30 mm: 16 / 10 / 6 / 7). It was first not adopted for
+    # Figure 22's closed loop (dev seed 2201; sunny steady error mean 0.182 → 0.346 mm at
+    # that code), but that loss is not the heading's: the tracker's own error is the same
+    # (estimation error mean / max at today's code 15 → 22 mm, clean 0.088 / 0.263 → 0.109 /
+    # 0.270, sunny 0.092 / 0.299 → 0.092 / 0.246, glare 0.067 / 0.195 → 0.069 / 0.195,
+    # shadow 0.096 / 0.288 → 0.091 / 0.261 mm); the steady error's max and most of its
+    # mean is the first frame after the turn at the T (0.01–1.23 mm in these 8 runs), i.e.
+    # where the robot ends its in-place turn, set by the junction report made 150–210 mm
+    # ahead and dead-reckoned through ≈ 100 frames of coasting. Any change to the path (a
+    # heading span, float32 rounding in Steger's filters) moves that by up to ±1 mm: at
+    # today's code (after fba7745's padding change alone) 15 mm gives sunny 0.249 / 1.225
+    # mm, not 0.182, and 22 mm 0.113 / 0.259. Figure 22, dev seed 2201, steady mean / max
+    # 15 → 22 mm, today's code (all turned): clean 0.143 / 0.676 → 0.121 / 0.239, sunny
+    # 0.249 / 1.225 → 0.113 / 0.259, glare 0.116 / 0.349 → 0.087 / 0.296, shadow 0.210 /
+    # 0.880 → 0.220 / 0.936 mm
+    heading_min_span_mm: float = 22.0
     heading_tukey_c: float = 3.0
     # then 8 more iterations at the biweight's textbook cut-off 4.685 (95 % efficiency under
     # Gaussian noise) from the line c = 3 found (`robust_line`'s c_refine; 0: off): with the
@@ -162,10 +183,11 @@ class KalmanConfig:
     # Off (default): the window's heading is fused every frame as a new independent
     # measurement, although consecutive windows share all but one centre, so the filter's
     # heading sd is too small while the window is short (straight passes at 1.5 mm a frame,
-    # the noise `sigma_meas` assumes, frames 10–24: RMS of error / sd 1.83, with this 1.21;
-    # tests/runtime/test_path_heading.py). On: only the information the window gained since
-    # the last fused one is fused (`WeldLineFilter.update_heading`'s gain: 1 / (R_prev +
-    # q_heading² · travel since), R at most 1 / `heading_gain_floor` × the window's). 48 dev
+    # the noise `sigma_meas` assumes, frames 10–24: RMS of error / sd 1.83, with this 1.21
+    # at a 15 mm span; 1.42 / 0.98 at 22 mm; tests/runtime/test_path_heading.py). On: only
+    # the information the window gained since the last fused one is fused
+    # (`WeldLineFilter.update_heading`'s gain: 1 / (R_prev + q_heading² · travel since), R
+    # at most 1 / `heading_gain_floor` × the window's). 48 dev
     # T approaches (experiments/tracking_diagnostics.py, one process; per kind offset mean /
     # max mm, heading mean °, RMS error / sd averaged over the runs), off → on: clean 0.085 /
     # 0.374 / 0.273 / 0.99 → 0.085 / 0.374 / 0.283 / 0.64, sunny 0.108 / 0.421 / 0.281 /
@@ -180,6 +202,20 @@ class KalmanConfig:
     # 1201 flank sunny and glare); floor 0.3: heading 0.279 / 0.279 / 0.319 / 0.456°
     heading_gain_only: bool = False
     heading_gain_floor: float = 0.1
+    # The window's heading standard deviation as the measurement model predicts it (each
+    # centre's variance `sigma_meas`² / its weight, the weights `PathHeading` gives them, as
+    # in `WeldLineFilter.update`): σ_pred² = `sigma_meas`² / Σ wᵢ (xᵢ − x̄_w)², x̄_w the
+    # weighted mean position. `heading_sd_model`: fuse max(the fit's residual sd, σ_pred)
+    # (the residual scale of the window's first 6–15 centres is itself noisy and often far
+    # below the bead's real error). `heading_max_sd_deg` > 0: fuse only once σ_pred ≤ this,
+    # a span requirement that follows the centres' confidence and spacing instead of a fixed
+    # `heading_min_span_mm` (at 1.5 mm a centre, confidence 0.6: 15 mm ↔ 1.9°, 22 mm ↔
+    # 1.07°, 30 mm ↔ 0.67°). Both off: on the 48 dev runs the model sd changed the heading
+    # error by ≤ 0.004° a kind and no goal (the sd then too large, RMS error / sd 0.92 →
+    # 0.63); 1.0 / 1.2° from a 6 mm floor on 7302 + 7305 (16 runs): the 22 mm span's misses,
+    # heading within 0.02° a kind (experiments/tracking_diagnostics.py).
+    heading_sd_model: bool = False
+    heading_max_sd_deg: float = 0.0
 
 
 class WeldLineFilter:

@@ -39,9 +39,23 @@ import numpy as np
 
 from .line_filter import KalmanConfig, WeldLineFilter, carry, robust_line
 
-__all__ = ["PathHeading"]
+__all__ = ["PathHeading", "predicted_sd"]
 
 NAN = math.nan
+
+
+def predicted_sd(x: np.ndarray, w: np.ndarray, sigma: float) -> float:
+    """Standard deviation (rad, small angles) of a weighted least-squares line's slope through
+    points at positions x whose lateral noise has variance sigma² / w (`KalmanConfig`,
+    `heading_sd_model`): sigma / √(Σ wᵢ (xᵢ − x̄_w)²), x̄_w = Σ wᵢ xᵢ / Σ wᵢ. inf when the
+    points have no spread."""
+    x, w = np.asarray(x, float), np.asarray(w, float)
+    sw = float(w.sum())
+    if sw <= 0:
+        return math.inf
+    xm = float(w @ x) / sw
+    sxx = float(w @ (x - xm) ** 2)
+    return sigma / math.sqrt(sxx) if sxx > 0 else math.inf
 
 
 class PathHeading:
@@ -100,6 +114,11 @@ class PathHeading:
         if c.heading_width_tol > 0:
             m = np.median(h[:, 3])
             w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
+        sd_pred = NAN
+        if c.heading_sd_model or c.heading_max_sd_deg > 0:
+            sd_pred = predicted_sd(h[:, 0], w, c.sigma_meas)
+            if c.heading_max_sd_deg > 0 and not sd_pred <= math.radians(c.heading_max_sd_deg):
+                return NAN, NAN
         _, th, sd = robust_line(
             h[:, 0],
             h[:, 1],
@@ -111,6 +130,8 @@ class PathHeading:
         )
         if not math.isfinite(th):
             return NAN, NAN
+        if c.heading_sd_model:
+            sd = max(sd, sd_pred)
         if kf.update_heading(th, sd, gain=1.0 / self._var if c.heading_gain_only else 0.0):
             self._var = max(sd, math.radians(c.sigma_heading_floor_deg)) ** 2
         return math.degrees(th), math.degrees(sd)

@@ -90,8 +90,7 @@ and σ chosen for it (`cslx.runtime.stripe_width`: the rule and the rig audit), 
 weights checked (`auto_weights`, `cslx.runtime.stripe_colour`: a green or blue laser is dark
 in R − G); each (σ, weights) other than the configured one is compiled once and kept.
 
-The filter itself (`WeldLineFilter`) and its tuning (`KalmanConfig`) live in
-`cslx.runtime.line_filter`.
+The filter (`WeldLineFilter`) and its tuning (`KalmanConfig`): `cslx.runtime.line_filter`.
 """
 
 from __future__ import annotations
@@ -107,7 +106,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MOTION
-from .junction_track import JunctionTrack
+from .junction_track import JunctionTrack, cut_by_view
 from .line_filter import KalmanConfig, WeldLineFilter
 from .path_heading import PathHeading
 from .step_program import step_program
@@ -590,6 +589,8 @@ class Tracker:
         x = raw["v_x_mm"] if raw["junction"] > 0.5 and tall else None
         xs = points_v[:, 0][np.isfinite(points_v[:, 0])] if points_v.ndim == 2 else points_v[:0]
         extent = (float(xs.min()), float(xs.max())) if xs.size else None
+        if x is not None and cut_by_view(x, raw["v_width_mm"], extent, c.junction_cut_margin_mm):
+            x = None
         ys = points_v[:, 1][np.isfinite(points_v[:, 1])] if points_v.ndim == 2 else points_v[:0]
         y = float(np.median(ys)) if ys.size else None
         xj = self._junctions.update(obs.frame, x, extent, y)
