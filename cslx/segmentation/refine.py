@@ -462,13 +462,22 @@ def _precision(fitted, use, unclipped):
 
 
 def _fitted(
-    mono, pos, use, derivative, clipped, fitted=None, *, sigma: float, axis: int, sigma_along=None
+    mono,
+    pos,
+    use,
+    derivative,
+    clipped,
+    fitted=None,
+    *,
+    sigma: float,
+    axis: int,
+    sigma_along: float = SIGMA_REFINE,
 ):
     """The profile fit's centres averaged along the path (`SIGMA_REFINE`), where the fit
     holds (`FIT_CHI2`, `FIT_SHARE`, `FIT_BORDER`, `FIT_MAX_CLIPPED`); their mean with
     `derivative` (the centres of `refine_centres`, weights `BLEND`) where it holds with up
     to `BLEND_MAX_CLIPPED` clipped pixels; `derivative` elsewhere. See `second_pass`."""
-    sa = SIGMA_REFINE if sigma_along is None else float(sigma_along)
+    sa = sigma_along
     excl = jnp.zeros(mono.shape, bool) if clipped is None else clipped
     if fitted is None:
         half = int(math.ceil(REACH + 4 * sigma))
