@@ -52,12 +52,18 @@ three rejected sightings in a row that agree with each other (the first sighting
 stray one); when
 x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` + the braking distance v²/(2 `accel_max`)
 (the robot brakes while it starts turning; without that term it came to rest ≈ 1.3–2.9 mm
-past the T in Figure 22's runs) → TURN: rotate by 90° plus the followed weld's last heading
-estimate (the crossing weld is perpendicular to the weld, not to the robot: a 1° heading
-left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld after the turn), ±
-(`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
-turned angle is integrated from the commanded ω, or from the measured heading when the
-caller passes it → FOLLOW, ignoring junction sightings for `junction_ignore_mm` of travel.
+past the T in Figure 22's runs) → TURN. In place (turn_radius_mm = 0) the robot turns where
+it comes to rest, so it brakes onto x_j: the trigger is x_j ≤ tolerance + the discrete
+braking distance + one frame's travel, and each TURN frame's speed is the largest from which
+braking at `accel_max` still stops within the dead-reckoned x_j (issue 12: the former fixed
+ramp stopped wherever the trigger fell within a frame's travel, −1.25 to +0.2 mm, −0.55 mm
+mean, in a kinematic sweep at 30 mm/s and 20 fps). TURN: rotate by 90° plus the followed
+weld's last heading estimate (the crossing weld is perpendicular to the weld, not to the
+robot: a 1° heading left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld
+after the turn), ± (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0)
+or on an arc; the turned angle is integrated from the commanded ω, or from the measured
+heading when the caller passes it → FOLLOW, ignoring junction sightings for
+`junction_ignore_mm` of travel.
 
 Pure Python; no I/O.
 """
@@ -285,7 +291,11 @@ class PathController:
                 rate = min(c.turn_rate, math.sqrt(c.alpha_max * ahead), remaining / dt)
                 w_t = c.turn_direction * rate
                 v_t = rate * c.turn_radius_mm
+                if c.turn_radius_mm == 0.0 and self.junction_x is not None:
+                    # in place: brake onto the junction, not by a fixed ramp (module docstring)
+                    v_t = min(self.v, self._stop_speed(self.junction_x, dt))
             v, w = self._limit(v_t, w_t, dt)
+            self._advance_junction(v, dt)
             return self._emit(v, w)
 
         if self.state is State.APPROACH_JUNCTION and (not seen_offset or scale <= 0.0):
@@ -296,7 +306,7 @@ class PathController:
                 self._sight(float(junction_x_mm))
             v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
             self._advance_junction(v, dt)
-            if self._at_turning_point():
+            if self._at_turning_point(dt):
                 self._start_turn()
             return self._emit(v, w)
         if not seen_offset or scale <= 0.0:
@@ -313,9 +323,13 @@ class PathController:
 
         speed = c.v_nominal * scale
         if self.state is State.APPROACH_JUNCTION:
-            if self._at_turning_point():
+            if self._at_turning_point(dt):
                 self._start_turn()
-                v, w = self._limit(0.0, 0.0, dt)
+                v_t = 0.0
+                if c.turn_radius_mm == 0.0:  # brake onto x_j (`_at_turning_point`)
+                    v_t = min(self.v, self._stop_speed(self.junction_x, dt))
+                v, w = self._limit(v_t, 0.0, dt)
+                self._advance_junction(v, dt)
                 return self._emit(v, w)
             speed = self._approach_speed(min(speed, c.approach_speed))
         v_t, w_t = self._follow(float(offset_mm), heading_deg, speed)
@@ -347,9 +361,40 @@ class PathController:
         room = max(self.junction_x - c.turn_radius_mm, 0.0)
         return min(speed, math.sqrt(2.0 * c.accel_max * room))
 
-    def _at_turning_point(self) -> bool:
-        """x_j within the tolerance plus the distance the robot needs to brake to rest."""
+    def _braking_distance(self, v: float, dt: float) -> float:
+        """Distance covered after a frame at speed v while braking at `accel_max`: the
+        limiter lowers v by b = accel_max·dt a frame, so dt·Σ_{k≥1} max(v − k b, 0)
+        (v²/(2a) − v·dt/2 when v is a multiple of b, not the continuous v²/(2a))."""
+        b = self.config.accel_max * dt
+        n = math.floor(v / b) if b > 0 else 0
+        return dt * (n * v - b * n * (n + 1) / 2.0)
+
+    def _stop_speed(self, room: float, dt: float) -> float:
+        """The largest speed v this frame from which braking at `accel_max` comes to rest
+        within `room` (dt·v + the braking distance ≤ room; bisection, both increase with v)."""
+        if room <= 0.0:
+            return 0.0
+        lo, hi = 0.0, room / dt
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if dt * mid + self._braking_distance(mid, dt) <= room:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def _at_turning_point(self, dt: float) -> bool:
+        """x_j (dead-reckoned past this frame's motion) within the tolerance plus what the
+        robot needs to brake to rest, or one more frame at this speed would leave less.
+
+        In place (turn_radius_mm = 0) the TURN then brakes onto x_j with `_stop_speed`
+        (issue 12): the former fixed ramp, started once x_j ≤ tolerance + v²/(2a), stopped
+        wherever the trigger fell within a frame's travel (v·dt = 1.5 mm in Figure 22):
+        −0.55 mm mean, −1.25 to +0.2 mm, in a kinematic sweep of the start distance."""
         c = self.config
+        stop = self._braking_distance(self.v, dt)
+        if c.turn_radius_mm == 0.0:
+            return self.junction_x <= c.junction_tolerance_mm + stop + self.v * dt
         stop = self.v * self.v / (2.0 * c.accel_max)
         return self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm + stop
 
