@@ -78,6 +78,11 @@ from ..config import MOTION
 
 __all__ = ["ControllerConfig", "Command", "PathController", "State", "wheel_speeds"]
 
+#: The in-place turn plans its braking onto x_j at this fraction of `accel_max`: the rest is
+#: headroom to brake harder when the measured travel (`travelled_mm`) shows the wheels lag
+#: the command (planned at the limit itself, a half-frame lag ended 0.75 mm past the T).
+_BRAKE_PLAN = 0.8
+
 
 class State(enum.Enum):
     FOLLOW = "follow"
@@ -164,6 +169,7 @@ class PathController:
         self._turn_start_heading: float | None = None
         self._weld_heading = 0.0  # last finite heading of the followed weld, rad
         self._junction_y = 0.0  # y_r where the junction sightings are taken, mm
+        self._predicted = 0.0  # v·dt taken off x_j at the last update (`travelled_mm`)
         self._turn_angle = math.pi / 2
         self._ignore_left = 0.0
         self.turns_completed = 0
@@ -210,6 +216,7 @@ class PathController:
         robot_heading_rad: float | None = None,
         sensor_ok: bool = False,
         junction_y_mm: float = 0.0,
+        travelled_mm: float | None = None,
     ) -> Command:
         """One control step of `dt` seconds from the latest observation.
 
@@ -226,7 +233,18 @@ class PathController:
                 `Observation.junction_y_mm`); the crossing weld, perpendicular to the
                 followed one, meets the robot's axis at x_j + y · tan θ (θ the followed
                 weld's heading).
+            travelled_mm: the measured forward distance since the previous update
+                (odometry); x_j, dead-reckoned with the commanded v·dt, is corrected by the
+                difference (the wheels lag a braking command: Figure 22's simulated robot,
+                400 mm/s² per wheel, went 0.3 mm past the commanded stop while it braked
+                and started to turn).
         """
+        if travelled_mm is not None and math.isfinite(travelled_mm):
+            slip = self._predicted - float(travelled_mm)
+            if self.junction_x is not None:
+                self.junction_x += slip
+            self._stray = [x + slip for x in self._stray]
+        self._predicted = 0.0
         if junction_y_mm is not None and math.isfinite(junction_y_mm):
             self._junction_y = float(junction_y_mm)
         if not (dt > 0 and math.isfinite(dt)):
@@ -362,15 +380,15 @@ class PathController:
         return min(speed, math.sqrt(2.0 * c.accel_max * room))
 
     def _braking_distance(self, v: float, dt: float) -> float:
-        """Distance covered after a frame at speed v while braking at `accel_max`: the
-        limiter lowers v by b = accel_max·dt a frame, so dt·Σ_{k≥1} max(v − k b, 0)
-        (v²/(2a) − v·dt/2 when v is a multiple of b, not the continuous v²/(2a))."""
-        b = self.config.accel_max * dt
+        """Distance covered after a frame at speed v while braking at the planned rate a'
+        (`_BRAKE_PLAN` · `accel_max`): v falls by b = a'·dt a frame, so dt·Σ_{k≥1}
+        max(v − k b, 0) (v²/(2a') − v·dt/2 when v is a multiple of b)."""
+        b = _BRAKE_PLAN * self.config.accel_max * dt
         n = math.floor(v / b) if b > 0 else 0
         return dt * (n * v - b * n * (n + 1) / 2.0)
 
     def _stop_speed(self, room: float, dt: float) -> float:
-        """The largest speed v this frame from which braking at `accel_max` comes to rest
+        """The largest speed v this frame from which braking at the planned rate comes to rest
         within `room` (dt·v + the braking distance ≤ room; bisection, both increase with v)."""
         if room <= 0.0:
             return 0.0
@@ -409,6 +427,7 @@ class PathController:
         self._turn_angle = math.pi / 2 + extra
 
     def _advance_junction(self, v: float, dt: float) -> None:
+        self._predicted += v * dt  # the motion assumed until the next update's odometry
         if self.junction_x is not None:
             self.junction_x -= v * dt
         self._stray = [x - v * dt for x in self._stray]

@@ -436,3 +436,41 @@ def test_in_place_turn_comes_to_rest_on_the_junction(on_weld):
         assert ctrl.turns_completed == 1
         errors.append(travelled - x_j)
     assert np.abs(errors).max() <= 0.05, errors
+
+
+def test_measured_travel_corrects_the_dead_reckoned_junction():
+    """A robot whose speed lags the command by half a frame (travel dt·(v_prev + v)/2) goes
+    past a junction dead-reckoned with the commanded v·dt while it brakes; the measured
+    travel (`travelled_mm`, the loop's odometry) corrects x_j and it comes to rest on it."""
+    dt = 0.05
+    stops = {}
+    for measured in (False, True):
+        ctrl = PathController(ControllerConfig(turn_rate=0.5))
+        v_prev, d = 0.0, None
+        for _ in range(60):
+            cmd = ctrl.update(dt, 0.0, 0.0, 1.0, travelled_mm=d if measured else None)
+            d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+        x_j = 50.3  # the junction from the current pose
+        cmd = ctrl.update(
+            dt,
+            0.0,
+            0.0,
+            1.0,
+            junction=True,
+            junction_x_mm=x_j,
+            travelled_mm=d if measured else None,
+        )
+        d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+        travelled = d
+        for _ in range(600):
+            cmd = ctrl.update(
+                dt, math.nan, math.nan, 0.0, sensor_ok=True, travelled_mm=d if measured else None
+            )
+            d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+            travelled += d
+            if ctrl.turns_completed:
+                break
+        assert ctrl.turns_completed == 1
+        stops[measured] = travelled - x_j
+    assert stops[False] > 0.3, stops  # the lag: past the T on the commanded dead-reckoning
+    assert abs(stops[True]) <= 0.2, stops  # what moves after the last command only
