@@ -52,6 +52,8 @@ KEYS = (
     "after_turn_max_error_mm",
     "mean_abs_estimation_error_mm",
     "max_abs_estimation_error_mm",
+    "turn_stop_x_mm",
+    "turn_junction_x_error_mm",
     "junction_frames",
     "blind_stops",
     "step_median_ms",

@@ -52,12 +52,18 @@ three rejected sightings in a row that agree with each other (the first sighting
 stray one); when
 x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` + the braking distance v²/(2 `accel_max`)
 (the robot brakes while it starts turning; without that term it came to rest ≈ 1.3–2.9 mm
-past the T in Figure 22's runs) → TURN: rotate by 90° plus the followed weld's last heading
-estimate (the crossing weld is perpendicular to the weld, not to the robot: a 1° heading
-left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld after the turn), ±
-(`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0) or on an arc; the
-turned angle is integrated from the commanded ω, or from the measured heading when the
-caller passes it → FOLLOW, ignoring junction sightings for `junction_ignore_mm` of travel.
+past the T in Figure 22's runs) → TURN. In place (turn_radius_mm = 0) the robot turns where
+it comes to rest, so it brakes onto x_j: the trigger is x_j ≤ tolerance + the discrete
+braking distance + one frame's travel, and each TURN frame's speed is the largest from which
+braking at `accel_max` still stops within the dead-reckoned x_j (issue 12: the former fixed
+ramp stopped wherever the trigger fell within a frame's travel, −1.25 to +0.2 mm, −0.55 mm
+mean, in a kinematic sweep at 30 mm/s and 20 fps). TURN: rotate by 90° plus the followed
+weld's last heading estimate (the crossing weld is perpendicular to the weld, not to the
+robot: a 1° heading left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld
+after the turn), ± (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0)
+or on an arc; the turned angle is integrated from the commanded ω, or from the measured
+heading when the caller passes it → FOLLOW, ignoring junction sightings for
+`junction_ignore_mm` of travel.
 
 Pure Python; no I/O.
 """
@@ -71,6 +77,11 @@ import math
 from ..config import MOTION
 
 __all__ = ["ControllerConfig", "Command", "PathController", "State", "wheel_speeds"]
+
+#: The in-place turn plans its braking onto x_j at this fraction of `accel_max`: the rest is
+#: headroom to brake harder when the measured travel (`travelled_mm`) shows the wheels lag
+#: the command (planned at the limit itself, a half-frame lag ended 0.75 mm past the T).
+_BRAKE_PLAN = 0.8
 
 
 class State(enum.Enum):
@@ -158,6 +169,7 @@ class PathController:
         self._turn_start_heading: float | None = None
         self._weld_heading = 0.0  # last finite heading of the followed weld, rad
         self._junction_y = 0.0  # y_r where the junction sightings are taken, mm
+        self._predicted = 0.0  # v·dt taken off x_j at the last update (`travelled_mm`)
         self._turn_angle = math.pi / 2
         self._ignore_left = 0.0
         self.turns_completed = 0
@@ -204,6 +216,7 @@ class PathController:
         robot_heading_rad: float | None = None,
         sensor_ok: bool = False,
         junction_y_mm: float = 0.0,
+        travelled_mm: float | None = None,
     ) -> Command:
         """One control step of `dt` seconds from the latest observation.
 
@@ -220,7 +233,18 @@ class PathController:
                 `Observation.junction_y_mm`); the crossing weld, perpendicular to the
                 followed one, meets the robot's axis at x_j + y · tan θ (θ the followed
                 weld's heading).
+            travelled_mm: the measured forward distance since the previous update
+                (odometry); x_j, dead-reckoned with the commanded v·dt, is corrected by the
+                difference (the wheels lag a braking command: Figure 22's simulated robot,
+                400 mm/s² per wheel, went 0.3 mm past the commanded stop while it braked
+                and started to turn).
         """
+        if travelled_mm is not None and math.isfinite(travelled_mm):
+            slip = self._predicted - float(travelled_mm)
+            if self.junction_x is not None:
+                self.junction_x += slip
+            self._stray = [x + slip for x in self._stray]
+        self._predicted = 0.0
         if junction_y_mm is not None and math.isfinite(junction_y_mm):
             self._junction_y = float(junction_y_mm)
         if not (dt > 0 and math.isfinite(dt)):
@@ -285,7 +309,11 @@ class PathController:
                 rate = min(c.turn_rate, math.sqrt(c.alpha_max * ahead), remaining / dt)
                 w_t = c.turn_direction * rate
                 v_t = rate * c.turn_radius_mm
+                if c.turn_radius_mm == 0.0 and self.junction_x is not None:
+                    # in place: brake onto the junction, not by a fixed ramp (module docstring)
+                    v_t = min(self.v, self._stop_speed(self.junction_x, dt))
             v, w = self._limit(v_t, w_t, dt)
+            self._advance_junction(v, dt)
             return self._emit(v, w)
 
         if self.state is State.APPROACH_JUNCTION and (not seen_offset or scale <= 0.0):
@@ -296,7 +324,7 @@ class PathController:
                 self._sight(float(junction_x_mm))
             v, w = self._limit(self._approach_speed(c.approach_speed), 0.0, dt)
             self._advance_junction(v, dt)
-            if self._at_turning_point():
+            if self._at_turning_point(dt):
                 self._start_turn()
             return self._emit(v, w)
         if not seen_offset or scale <= 0.0:
@@ -313,9 +341,13 @@ class PathController:
 
         speed = c.v_nominal * scale
         if self.state is State.APPROACH_JUNCTION:
-            if self._at_turning_point():
+            if self._at_turning_point(dt):
                 self._start_turn()
-                v, w = self._limit(0.0, 0.0, dt)
+                v_t = 0.0
+                if c.turn_radius_mm == 0.0:  # brake onto x_j (`_at_turning_point`)
+                    v_t = min(self.v, self._stop_speed(self.junction_x, dt))
+                v, w = self._limit(v_t, 0.0, dt)
+                self._advance_junction(v, dt)
                 return self._emit(v, w)
             speed = self._approach_speed(min(speed, c.approach_speed))
         v_t, w_t = self._follow(float(offset_mm), heading_deg, speed)
@@ -347,9 +379,40 @@ class PathController:
         room = max(self.junction_x - c.turn_radius_mm, 0.0)
         return min(speed, math.sqrt(2.0 * c.accel_max * room))
 
-    def _at_turning_point(self) -> bool:
-        """x_j within the tolerance plus the distance the robot needs to brake to rest."""
+    def _braking_distance(self, v: float, dt: float) -> float:
+        """Distance covered after a frame at speed v while braking at the planned rate a'
+        (`_BRAKE_PLAN` · `accel_max`): v falls by b = a'·dt a frame, so dt·Σ_{k≥1}
+        max(v − k b, 0) (v²/(2a') − v·dt/2 when v is a multiple of b)."""
+        b = _BRAKE_PLAN * self.config.accel_max * dt
+        n = math.floor(v / b) if b > 0 else 0
+        return dt * (n * v - b * n * (n + 1) / 2.0)
+
+    def _stop_speed(self, room: float, dt: float) -> float:
+        """The largest speed v this frame from which braking at the planned rate comes to rest
+        within `room` (dt·v + the braking distance ≤ room; bisection, both increase with v)."""
+        if room <= 0.0:
+            return 0.0
+        lo, hi = 0.0, room / dt
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if dt * mid + self._braking_distance(mid, dt) <= room:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def _at_turning_point(self, dt: float) -> bool:
+        """x_j (dead-reckoned past this frame's motion) within the tolerance plus what the
+        robot needs to brake to rest, or one more frame at this speed would leave less.
+
+        In place (turn_radius_mm = 0) the TURN then brakes onto x_j with `_stop_speed`
+        (issue 12): the former fixed ramp, started once x_j ≤ tolerance + v²/(2a), stopped
+        wherever the trigger fell within a frame's travel (v·dt = 1.5 mm in Figure 22):
+        −0.55 mm mean, −1.25 to +0.2 mm, in a kinematic sweep of the start distance."""
         c = self.config
+        stop = self._braking_distance(self.v, dt)
+        if c.turn_radius_mm == 0.0:
+            return self.junction_x <= c.junction_tolerance_mm + stop + self.v * dt
         stop = self.v * self.v / (2.0 * c.accel_max)
         return self.junction_x <= c.turn_radius_mm + c.junction_tolerance_mm + stop
 
@@ -364,6 +427,7 @@ class PathController:
         self._turn_angle = math.pi / 2 + extra
 
     def _advance_junction(self, v: float, dt: float) -> None:
+        self._predicted += v * dt  # the motion assumed until the next update's odometry
         if self.junction_x is not None:
             self.junction_x -= v * dt
         self._stray = [x - v * dt for x in self._stray]

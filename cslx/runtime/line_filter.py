@@ -102,6 +102,10 @@ class KalmanConfig:
     # kept instead of 30 (9 of the approaches): a last report 1.24 mm off
     junction_crossing_zone_mm: tuple[float, float] = (-40.0, 12.0)
     junction_keep_clear: int = 30
+    # how those sightings make one position: "median", or "mean" (of those within
+    # `junction_tol_mm` of the median; `JunctionTrack._fused`). Issue 12, Figure 22 dev
+    # seeds 2201/2203/2204: not the default (offline evidence only, see the branch report)
+    junction_fuse: str = "median"
     # A crossing bead lower than this is not a weld: on rendered straight-weld frames the
     # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation
     # artefacts) that the detector took for a crossing bead; weld reinforcement is 1–3 mm.

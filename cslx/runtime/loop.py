@@ -206,6 +206,7 @@ class TrackingLoop:
             robot_heading_rad=heading,
             sensor_ok=obs.stripe_ok,
             junction_y_mm=obs.junction_y_mm,
+            travelled_mm=None if odometry is None else odometry[0],
         )
         sent = False
         if self.link is not None:

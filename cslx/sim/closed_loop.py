@@ -152,6 +152,7 @@ def run_closed_loop(
     t_render = []
     follow = 0
     turned_at = None
+    turn_start = None  # (frame, controller's x_j, true axis distance to the bar's centre line)
     it = range(n_frames)
     if progress:
         from tqdm import tqdm
@@ -185,6 +186,11 @@ def run_closed_loop(
             obs, cmd = done.observation, done.command
             sim.advance(dt)
             t2 = time.perf_counter()
+            if turn_start is None and cmd.state is State.TURN:
+                # x_j is dead-reckoned to the pose after this step's motion: compare it with
+                # that pose's distance along its axis to the bar's centre line (x_w = 0)
+                xa, _, tha = sim.pose()
+                turn_start = (i, controller.junction_x, -xa / math.cos(tha))
             t_render.append(t1 - t0)
             t_loop.append(t2 - t1)
             if controller.turns_completed > 0:
@@ -235,6 +241,14 @@ def run_closed_loop(
     est = est[np.isfinite(est)]
     lat = np.array([r["latency_ms"] for r in rows[1:]])
     nan = math.nan
+    # where the robot stopped at the T (issue 12: the turn is in place, so the reference
+    # point's x_w after the turn, + = past the bar's centre line, becomes the look-ahead
+    # point's offset on the bar) and the controller's junction distance error when the turn
+    # started (+ = x_j too far: the robot goes on past the T)
+    stop_x = rows[turned_at]["x_mm"] if turned_at is not None else nan
+    xj_err = nan
+    if turn_start is not None and turn_start[1] is not None:
+        xj_err = float(turn_start[1] - turn_start[2])
     return dict(
         rows=rows,
         welds=dict(
@@ -259,6 +273,9 @@ def run_closed_loop(
         mean_abs_estimation_error_mm=float(np.abs(est).mean()) if est.size else nan,
         max_abs_estimation_error_mm=float(np.abs(est).max()) if est.size else nan,
         turns_completed=controller.turns_completed,
+        turn_start_frame=turn_start[0] if turn_start is not None else None,
+        turn_stop_x_mm=float(stop_x),
+        turn_junction_x_error_mm=xj_err,
         junction_frames=int(sum(r["junction"] for r in rows)),
         compile_s=tracker.compile_s,
         step_median_ms=float(np.median(lat)) if lat.size else nan,

@@ -409,3 +409,68 @@ def test_junction_distance_is_taken_along_the_robot_axis(heading_deg):
         plain.update(0.05, 0.0, heading_deg, 0.9)
     plain.update(0.05, 0.0, heading_deg, 0.9, junction=True, junction_x_mm=100.0)
     assert plain.junction_x == pytest.approx(100.0 - plain.v * 0.05, abs=1e-6)
+
+
+@pytest.mark.parametrize("on_weld", [False, True])
+def test_in_place_turn_comes_to_rest_on_the_junction(on_weld):
+    """Issue 12: the robot turns in place where it comes to rest, so it must come to rest at
+    x_j wherever within a frame's travel (1.5 mm at 30 mm/s, 20 fps) the turning point falls.
+    The former fixed braking ramp stopped 1.25 mm short to 0.2 mm past (−0.55 mm mean)."""
+    dt, errors = 0.05, []
+    for x0 in np.linspace(50.0, 51.5, 16):
+        ctrl = PathController(ControllerConfig(turn_rate=0.5))
+        for _ in range(60):
+            ctrl.update(dt, 0.0, 0.0, 1.0)
+        assert ctrl.v == pytest.approx(30.0)
+        ctrl.update(dt, 0.0, 0.0, 1.0, junction=True, junction_x_mm=x0)
+        x_j, travelled = x0 - ctrl.v * dt, 0.0
+        for _ in range(600):
+            if on_weld:  # the horizontal stripe still on the followed weld
+                cmd = ctrl.update(dt, 0.0, 0.0, 1.0)
+            else:  # past the end of the stem: plate only
+                cmd = ctrl.update(dt, math.nan, math.nan, 0.0, sensor_ok=True)
+            assert cmd.v_mm_s >= 0.0
+            travelled += cmd.v_mm_s * dt
+            if ctrl.turns_completed:
+                break
+        assert ctrl.turns_completed == 1
+        errors.append(travelled - x_j)
+    assert np.abs(errors).max() <= 0.05, errors
+
+
+def test_measured_travel_corrects_the_dead_reckoned_junction():
+    """A robot whose speed lags the command by half a frame (travel dt·(v_prev + v)/2) goes
+    past a junction dead-reckoned with the commanded v·dt while it brakes; the measured
+    travel (`travelled_mm`, the loop's odometry) corrects x_j and it comes to rest on it."""
+    dt = 0.05
+    stops = {}
+    for measured in (False, True):
+        ctrl = PathController(ControllerConfig(turn_rate=0.5))
+        v_prev, d = 0.0, None
+        for _ in range(60):
+            cmd = ctrl.update(dt, 0.0, 0.0, 1.0, travelled_mm=d if measured else None)
+            d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+        x_j = 50.3  # the junction from the current pose
+        cmd = ctrl.update(
+            dt,
+            0.0,
+            0.0,
+            1.0,
+            junction=True,
+            junction_x_mm=x_j,
+            travelled_mm=d if measured else None,
+        )
+        d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+        travelled = d
+        for _ in range(600):
+            cmd = ctrl.update(
+                dt, math.nan, math.nan, 0.0, sensor_ok=True, travelled_mm=d if measured else None
+            )
+            d, v_prev = dt * 0.5 * (v_prev + cmd.v_mm_s), cmd.v_mm_s
+            travelled += d
+            if ctrl.turns_completed:
+                break
+        assert ctrl.turns_completed == 1
+        stops[measured] = travelled - x_j
+    assert stops[False] > 0.3, stops  # the lag: past the T on the commanded dead-reckoning
+    assert abs(stops[True]) <= 0.2, stops  # what moves after the last command only
