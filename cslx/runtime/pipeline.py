@@ -141,11 +141,22 @@ def init_state(
 
 
 def _stripe(
-    I, W0, axis, L, config: PipelineConfig, max_steps, use_med, symmetric=False, size=0, stride=1
+    I,
+    W0,
+    axis,
+    L,
+    config: PipelineConfig,
+    max_steps,
+    use_med,
+    symmetric=False,
+    size=0,
+    stride=1,
+    lag=False,
 ):
     """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis).
 
     ``stride`` > 1: the filter is found on every stride-th segment and applied to all.
+    ``lag``: the output of W0 and one step from it for the next frame (`med`'s ``lag``).
     """
     if use_med:
         sub = I if stride == 1 else (I[:, ::stride] if axis == 0 else I[::stride])
@@ -159,6 +170,7 @@ def _stripe(
             delay="centre" if symmetric else config.med_delay,
             ridge_sigma=config.sigma,
             symmetric=symmetric,
+            lag=lag,
         )
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
@@ -197,6 +209,8 @@ def _full(I, state: PipelineState, config: PipelineConfig):
 
 
 def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=None):
+    # tracking frames: ``roi_max_steps`` (or the lagged step); a first-pass frame converges
+    lag = config.roi_med_lag and max_steps is None
     max_steps = config.roi_max_steps if max_steps is None else max_steps
     height, width = shape
     band_h = cut(0, state.row0, 2 * config.roi_half_h)
@@ -204,10 +218,10 @@ def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=N
     med_on, sym = config.use_med and config.roi_med, config.roi_symmetric
     L = config.L_roi
     ch, Wh, sh, kh = _stripe(
-        band_h, state.roi_filter_h, 0, L, config, max_steps, med_on, sym, height
+        band_h, state.roi_filter_h, 0, L, config, max_steps, med_on, sym, height, lag=lag
     )
     cv, Wv, sv, kv = _stripe(
-        band_v, state.roi_filter_v, 1, L, config, max_steps, med_on, sym, width
+        band_v, state.roi_filter_v, 1, L, config, max_steps, med_on, sym, width, lag=lag
     )
     new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
     return (

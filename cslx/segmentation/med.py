@@ -264,8 +264,23 @@ def _unrolled(step, y0, args, tol, max_steps):
 
 
 @eqx.filter_jit
-def _med(I, W0, axis, L, taper, tol, max_steps, loading, delay_kind, ridge_sigma, symmetric=False):
+def _med(
+    I,
+    W0,
+    axis,
+    L,
+    taper,
+    tol,
+    max_steps,
+    loading,
+    delay_kind,
+    ridge_sigma,
+    symmetric=False,
+    lag=False,
+):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
+    if lag:
+        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric)
 
     def step(y, args):
         # y = (filter, Σ_j k_j of the previous filter): the solver's error on the second
@@ -314,6 +329,7 @@ def med(
     delay: Literal["ridge", "xcorr", "centre"] | None = None,
     ridge_sigma: float = 2.0,
     symmetric: bool = False,
+    lag: bool = False,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -341,6 +357,11 @@ def med(
             several fixed points, and with L = M/2 on synthetic full frames it converged to
             filters with two lobes far apart that copy the stripe 28–43 px away;
             `cslx.segmentation.med_bands` checks its band results against the input.
+        lag: for video, one step a frame (``init`` the previous frame's filter): the output
+            is that of ``init`` itself and ``filter`` is one fixed-point step from it, for
+            the next frame (`_lagged`; ``max_steps`` and ``tol`` unused, ``steps`` 1,
+            ``converged`` False, ``kurtosis`` at ``init``): one inverse-FFT pass (the
+            statistics at the new filter) fewer than ``max_steps=1``.
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -352,7 +373,31 @@ def med(
     loading = _default_loading(I.dtype) if loading is None else float(loading)
     delay = _check_delay(delay, symmetric)
     args = (int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma))
-    return _med(I, W0, axis, L, *args, bool(symmetric))
+    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag))
+
+
+def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric):
+    """`med`'s ``lag``: the output of the warm-start filter W0, and one step from it.
+
+    One fixed-point step W1 = update(W0) needs the output statistics at W0 (`med_fft.update`
+    computes them first); those same statistics give W0's delay, sign and kurtosis, and its
+    output is one more inverse FFT. A step that is then output costs a third pass (W1's
+    statistics) before its output. Both variants take one step a frame from the previous
+    frame's filter and share the fixed point (W1 = W0 there); the lagged one filters frame t
+    with the filter of the step taken on frame t − 1.
+    """
+    W1, st = _f.update(W0, pb, loading, symmetric)
+    delay, sign = _delay(W0, st, pb, delay_kind, ridge_sigma)
+    if delay_kind == "centre" and pb.L % 2:
+        out = _f.centre_output(st, sign, pb)
+    elif delay_kind == "centre":
+        out = _f.shifted_output(W0 * sign, (pb.L - 1) / 2, pb)
+    else:
+        out = _f.shifted_output(W0 * sign, delay, pb)
+    out = out.T if axis == 0 else out
+    # ±W have the same kurtosis and the step keeps W0's orientation: W1 takes W0's sign
+    one = jnp.ones((), jnp.int32)
+    return MEDResult(out, W1 * sign, delay, st.excess, one, jnp.zeros((), bool))
 
 
 @eqx.filter_jit

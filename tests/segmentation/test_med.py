@@ -581,3 +581,28 @@ def test_static_centre_delay_is_the_traced_shift():
     got = med_fft.shifted_output(W, 7.5, pb)
     ref = jax.jit(med_fft.shifted_output)(W, jnp.asarray(7.5), pb)
     np.testing.assert_allclose(np.asarray(got), np.asarray(ref), rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("symmetric, axis", [(True, 0), (True, 1), (False, 0)])
+def test_lagged_step_outputs_the_start_filter_and_steps_once(symmetric, axis):
+    """`med`'s ``lag`` (tracking bands, issue 13): the output, delay and kurtosis are those of
+    the warm-start filter (`med_apply`), and the returned filter is the one fixed-point step
+    that ``max_steps=1`` takes from it."""
+    truth = 30 + 3 * np.sin(np.arange(96) / 9)
+    I = jnp.asarray(stripe_image(64, 96, truth, speckle=0.2, seed=5))
+    I = I if axis == 0 else I.T
+    prev = jnp.asarray(stripe_image(64, 96, truth + 0.7, speckle=0.2, seed=6))
+    prev = prev if axis == 0 else prev.T
+    kw = dict(axis=axis, L=16, symmetric=symmetric)
+    W0 = med(prev, max_steps=60, **kw).filter  # the previous frame's filter
+    lag = med(I, init=W0, lag=True, **kw)
+    one = med(I, init=W0, max_steps=1, tol=1e-12, **kw)
+    assert int(lag.steps) == int(one.steps) == 1
+    np.testing.assert_allclose(np.asarray(lag.filter), np.asarray(one.filter), atol=1e-12)
+    kind = "centre" if symmetric else "ridge"
+    out, delay, kurt = med_apply(I, W0, axis=axis, delay=kind)
+    np.testing.assert_allclose(np.asarray(lag.output), np.asarray(out), atol=1e-9)
+    assert float(lag.delay) == pytest.approx(float(delay), abs=1e-9)
+    assert float(lag.kurtosis) == pytest.approx(float(kurt), abs=1e-9)
+    # the step moved the filter: the lagged output is not the stepped one
+    assert float(jnp.max(jnp.abs(lag.filter - W0))) > 1e-6
