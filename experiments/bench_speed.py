@@ -563,12 +563,14 @@ def bench_tracking_pieces(b: Bench) -> None:
                 init=W,
                 max_steps=config.roi_max_steps,
                 symmetric=True,
+                lag=config.roi_med_lag,
             )
         )
+        steps = "one lagged step" if config.roi_med_lag else f"≤ {config.roi_max_steps} steps"
         b.stage[f"band_med_{stripe}"] = b.add(
             "stage",
             f"tracking: MED on the {stripe} band ({size}, L={config.L_roi}, linear phase, "
-            f"warm, ≤ {config.roi_max_steps} steps)",
+            f"warm, {steps})",
             timeit(
                 lambda i, band=band, W=W, warm=warm: _block(warm(band[i], W)),
                 list(range(F)),
