@@ -38,7 +38,8 @@ class PipelineConfig(eqx.Module):
         seed 7301, tracker with MED; its default has none) offset error mean up in 7 of 8
         runs (shadow, beside: 0.148 → 0.237 mm, max 0.467 → 0.713 mm).
     max_steps / tol: MED fixed-point cap and relative kurtosis tolerance (Table 2, step 5),
-        for the full frame; roi_max_steps for the tracking bands: the band filter is carried
+        for the full frame; roi_max_steps for the tracking bands (with ``roi_med_lag``
+        off): the band filter is carried
         from frame to frame and evolves slowly, so a fixed 2 steps per frame keep it at the
         fixed point (issue 13; tracking over rendered sunny video, band − full-frame MED
         centres, worst |median| over 7 frames × 2 stripes: dev seed 1 0.010 px with 1, 2, 3
@@ -112,8 +113,12 @@ class PipelineConfig(eqx.Module):
         over 24 rendered sunny video frames, band − full-frame MED centres, worst |median|
         over 8 frames × 2 stripes: dev video seed 0 0.0220 px (2 steps 0.0220, 1 step
         0.0220), seed 1 0.0096 px (0.0092, 0.0096); median |centre − truth| 0.1000 / 0.1100
-        px (2 steps 0.0985 / 0.1113); tracking mode 14.32 → 12.35 ms median (p10 7.40 →
-        5.98; experiments.ab_tracking against 2 steps, 300 interleaved frames, load 5–8).
+        px (2 steps 0.0985 / 0.1113); experiments/bench_speed.py's agreement on seed 0
+        unchanged for the default band filters (0.022 px; free filters 0.169 → 0.206 px).
+        Tracking mode (experiments.ab_tracking, 300–400 interleaved frames, load 4–11)
+        against 2 steps: median 14.32 → 12.35, 8.53 → 7.90, 12.19 → 10.99 ms, p10 7.40 →
+        5.98, 6.58 → 5.66, 6.81 → 5.87 ms; against ``roi_max_steps=1`` without the lag
+        10.10 → 9.31 ms (p10 6.52 → 5.92).
     med_delay: ``"ridge"`` (default; the ridge displacement at Steger's scale ``sigma``) or
         ``"xcorr"`` (the correlation peak of `cslx.segmentation.med.med`'s default), for the
         full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
