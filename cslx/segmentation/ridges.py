@@ -482,7 +482,16 @@ def _path_scatter(pos, valid, lag, order=None):
     0.0304 / 0.1409; Γ 2.5 / 3: 0.0304 / 0.1357, 0.0307 / 0.1420; 0.0319 / 0.1389, 0.0304
     / 0.1467; lag 8 / 16 / 24 instead of 12: 0.0357 / 0.1533, 0.0424 / 0.1594; 0.0309 /
     0.1363, 0.0310 / 0.1439; 0.0328 / 0.1411, 0.0310 / 0.1528 (frame 2, lag 16: 0.0296 /
-    0.1435, 0.0327 / 0.1506). No setting improves both stripes.
+    0.1435, 0.0327 / 0.1506). No setting improves both stripes. Flat wall (seeds 41–46, no
+    curvature at all), order 3: worst RMS 0.066 → 0.065 px, but 19 of 24 frame-stripes
+    with a larger RMS (largest distance 0.166 → 0.253 px, saturated 41 H); none beyond 0.5 px.
+
+    Most of the two estimates' difference on rendered frames is not curvature but the
+    errors' correlation along the path, to which the two differences respond differently:
+    unit-std noise smoothed along the path by a Gaussian of σ 3 / 6 / 12 centres (the second
+    pass averages along σ 6) reads 1.01 / 0.72 / 0.34 with order 2 and 1.01 / 0.68 / 0.24
+    with order 3 (straight path, lag 12). Both underestimate a correlated error's std; the
+    second pass's correlation c (`refine.REFINE_CORRELATION`) was chosen with order 2.
     """
     order = SCATTER_ORDER if order is None else order
     n = pos.shape[0]
