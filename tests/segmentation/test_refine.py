@@ -248,3 +248,25 @@ def test_second_pass_on_a_path_curved_along_its_whole_length(monkeypatch, order)
         assert errors[40.0] < 0.05
     else:
         assert errors[40.0] > 0.08
+
+
+def test_local_weights_follow_the_local_scatter():
+    from cslx.segmentation.refine import LOCAL_BOUNDS, _local_weights
+
+    n = 640
+    j = np.arange(n)
+    noisy = (j >= 250) & (j < 330)
+    rng = np.random.default_rng(2)
+    smooth = 300.0 + 0.05 * j
+    new = smooth + np.where(noisy, 0.4, 0.05) * rng.normal(size=n)
+    use = np.ones(n, bool)
+    use[500:520] = False
+    w = np.asarray(
+        _local_weights(jnp.asarray(new, jnp.float32), jnp.asarray(smooth, jnp.float32),
+                       jnp.asarray(use))
+    )  # fmt: skip
+    lo, hi = LOCAL_BOUNDS
+    assert (w >= lo - 1e-6).all() and (w <= hi + 1e-6).all()
+    assert np.median(w[use]) == pytest.approx(1.0, abs=0.2)
+    assert w[270:310].max() < 0.3  # (0.05 / 0.4)^(2·½) = 0.125, bounded below by 0.2
+    assert w[:200].min() > 0.6
