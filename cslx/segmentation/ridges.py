@@ -482,7 +482,10 @@ def _path_scatter(pos, valid, lag, order=None):
     0.0304 / 0.1409; Γ 2.5 / 3: 0.0304 / 0.1357, 0.0307 / 0.1420; 0.0319 / 0.1389, 0.0304
     / 0.1467; lag 8 / 16 / 24 instead of 12: 0.0357 / 0.1533, 0.0424 / 0.1594; 0.0309 /
     0.1363, 0.0310 / 0.1439; 0.0328 / 0.1411, 0.0310 / 0.1528 (frame 2, lag 16: 0.0296 /
-    0.1435, 0.0327 / 0.1506). No setting improves both stripes. Flat wall (seeds 41–46, no
+    0.1435, 0.0327 / 0.1506); with `refine.LOCAL_WEIGHTS` (final smoothing only), order 2 / 3:
+    0.0297 / 0.1336, 0.0312 / 0.1393 and 0.0295 / 0.1323, 0.0316 / 0.1388 (frame 2: 0.0282 /
+    0.1346, 0.0347 / 0.1495 and 0.0281 / 0.1357, 0.0377 / 0.1511). No setting improves both
+    stripes. Flat wall (seeds 41–46, no
     curvature at all), order 3: worst RMS 0.066 → 0.065 px, but 19 of 24 frame-stripes
     with a larger RMS (largest distance 0.166 → 0.253 px, saturated 41 H); none beyond 0.5 px.
 
