@@ -97,11 +97,27 @@ def _moments(w, y, halves, side: int = 0):
     return s.reshape(n_h, 5, -1), t.reshape(n_h, 3, -1)
 
 
-def _window_fits(pos, valid, support, halves, side: int = 0):
+def _counts(support, halves, side: int = 0):
+    """(H, N) number of `support` centres in every window (`_kernels`' extent), by cumsum."""
+    n = support.shape[0]
+    j = jnp.arange(n)
+    c = jnp.concatenate([jnp.zeros(1, jnp.int32), jnp.cumsum(support.astype(jnp.int32))])
+    rows = []
+    for h in halves:
+        lo = jnp.clip(j - h if side <= 0 else j, 0, n - 1)
+        hi = jnp.clip(j + h if side >= 0 else j, 0, n - 1)
+        rows.append(c[hi + 1] - c[lo])
+    return jnp.stack(rows)
+
+
+def _window_fits(pos, valid, support, halves, side: int = 0, weights=None):
     """Value at each valid centre of the local quadratic through the `support` centres within
-    ±h (every h of `halves`) and its white-noise variance factor (M⁻¹)₀₀: (estimate, factor),
-    each (H, N), NaN / inf where the window holds too few support centres."""
+    ±h (every h of `halves`), weighted by `weights` (None: uniform), and its variance
+    factor (M⁻¹)₀₀ for a centre of weight 1: (estimate, factor), each (H, N), NaN / inf where
+    the window holds fewer than 5 support centres."""
     w = support.astype(pos.dtype)
+    if weights is not None:
+        w = w * weights.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
     moments = _moments(w, y, halves, side)
     (s0, s1, s2, s3, s4), (t0, t1, t2) = (jnp.moveaxis(a, 1, 0) for a in moments)
@@ -109,7 +125,8 @@ def _window_fits(pos, valid, support, halves, side: int = 0):
     c01 = s2 * s3 - s1 * s4
     c02 = s1 * s3 - s2 * s2
     det = s0 * c00 + s1 * c01 + s2 * c02
-    ok = valid & (s0 >= 5) & (det > 1e-6 * s0**3)
+    count = s0 if weights is None else _counts(support, halves, side)
+    ok = valid & (count >= 5) & (det > 1e-6 * s0**3)
     safe = jnp.where(ok, det, 1.0)
     est = y + (c00 * t0 + c01 * t1 + c02 * t2) / safe
     return jnp.where(ok, est, jnp.nan), jnp.where(ok, c00 / safe, jnp.inf)
@@ -125,6 +142,7 @@ def smooth_path(
     correlation=CORRELATION,
     halves=HALVES,
     sided: bool = False,
+    weights=None,
 ):
     """Local-quadratic path smoothing with per-centre windows by the ICI rule (module docstring).
 
@@ -141,6 +159,9 @@ def smooth_path(
             window by the ICI rule too, and return the inverse-variance mean of the three
             estimates (static; the linked detector's second pass,
             `cslx.segmentation.refine.second_pass`).
+        weights: (N,) per-centre weights of the fits (relative inverse variances, ≈ 1 for
+            a typical centre; None: uniform); the factor is then that of a centre of
+            weight 1 (`refine.LOCAL_WEIGHTS`).
 
     Returns:
         (smoothed pos, factor): factor (N,) ≤ 1 is the ratio of the chosen estimate's std to
@@ -151,7 +172,10 @@ def smooth_path(
     support = valid if support is None else support & valid
     sides = (0, -1, 1) if sided else (0,)
     num = den = 0.0
-    fits = [_ici(pos, valid, support, scatter, gamma, correlation, halves, side) for side in sides]
+    fits = [
+        _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights)
+        for side in sides
+    ]
     for chosen, f, use in fits:
         w = jnp.where(use, 1.0 / jnp.maximum(f, 1e-3) ** 2, 0.0)
         num = num + w * jnp.where(use, chosen, 0.0)
@@ -161,10 +185,10 @@ def smooth_path(
     return jnp.where(use, out, pos), jnp.where(use, jnp.sqrt(1.0 / jnp.where(use, den, 1.0)), 1.0)
 
 
-def _ici(pos, valid, support, scatter, gamma, correlation, halves, side):
+def _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights=None):
     """The ICI rule over the windows of one side (`smooth_path`): (estimate, its std factor,
     whether a window was usable), each (N,)."""
-    est, var = _window_fits(pos, valid, support, halves, side)  # (H, N)
+    est, var = _window_fits(pos, valid, support, halves, side, weights)  # (H, N)
     # One centre's own noise bounds a fit through it; an extrapolation (a centre outside the
     # support) can be worse than that.
     factor = jnp.sqrt(jnp.where(support, jnp.minimum(correlation * var, 1.0), correlation * var))

@@ -135,6 +135,13 @@ SIGMA_REFINE = 6.0
 #: too) and its correlation c: see `second_pass`.
 REFINE_HALVES = (2, 4, 8, 16, 32, 64, 96, 128, 192, 256)
 REFINE_CORRELATION = 6.0
+#: Second smoothing weighted by each centre's local precision (`second_pass`, `_local_weights`):
+#: on/off, the along-path Gaussian σ (centres) of the local residual variance, the power of the
+#: relative precision and the weights' bounds.
+LOCAL_WEIGHTS = True
+LOCAL_SIGMA = 16.0
+LOCAL_POWER = 0.5
+LOCAL_BOUNDS = (0.2, 5.0)
 
 
 def _along(values, weights, sigma_along: float):
@@ -281,6 +288,37 @@ def second_pass(
     0.148); `FIT_MAX_CLIPPED` 5 (0.030 / 0.132, 0.032 / 0.146); `BLEND` 0.7 (0.030 / 0.132,
     0.032 / 0.146, V gross 0.070 %); running the whole second pass twice around its own
     output (0.030 / 0.132, 0.032 / 0.147, H gross 0.035 %, +≈ 20 ms).
+
+    Local weights (`LOCAL_WEIGHTS`, issue 11, the p95). The final smoothing is run twice: the
+    second time each centre's fits weigh it by its local precision (`_local_weights`: the first
+    smoothing's residual variance over ±`LOCAL_SIGMA` centres, relative to the path's median, to
+    the power `LOCAL_POWER`, bounded by `LOCAL_BOUNDS`), so a stretch that scatters more
+    (speckle, a glint's edge, a dark square of a printed target) does not pull the quiet centres
+    next to it (tests/segmentation/test_path.py: 0.018 → 0.007 px RMS on synthetic paths).
+    Development seeds 7100–7117, 18 conditions, H / V median / p95 mm: frames 0–1 (36,
+    `experiments.robust_extraction`) 0.0300 / 0.1347, 0.0313 / 0.1438 → 0.0297 / 0.1336, 0.0312
+    / 0.1398 (clean V p95 0.124 → 0.115, sunny V median 0.040 → 0.038; worse: glare medians
+    0.033 → 0.036 H, 0.031 → 0.034 V, blue H p95 0.151 → 0.153, green V p95 0.123 → 0.125,
+    printed V p95 0.186 → 0.188); fresh frame 2 (18, not used to choose): 0.0290 / 0.1397,
+    0.0358 / 0.1517 → 0.0283 / 0.1346, 0.0346 / 0.1495; detection and gross unchanged (100 /
+    99.90 %, 0.022 / 0.064 % on frames 0–1; 0 on frame 2). Flat wall (seeds 41–46): RMS smaller
+    in 19 of 24 frame-stripes, worst 0.066 → 0.064 px, none beyond 0.5 px. Chosen on frames 0–1
+    as the only one of three settings that kept both medians (the final smoothing alone, first
+    pass as recorded): σ 16, power 1: 0.0297 / 0.1313, 0.0315 / 0.1374 (frame 2: 0.0287 /
+    0.1352, 0.0357 / 0.1504); σ 32, power 1: 0.0296 / 0.1316, 0.0314 / 0.1373 (0.0287 / 0.1343,
+    0.0361 / 0.1534); σ 32, power 0.5, frame 2 only: 0.0285 / 0.1374, 0.0356 / 0.1507. Also
+    tried and not kept (final smoothing alone, frames 0–1): a floor τ on the ICI's standard
+    deviations, √(sd² + τ²), τ = 0.1 / 0.2 / 0.3 × scatter (0.0302 / 0.1351, 0.0311 / 0.1437;
+    0.0308 / 0.1370, 0.0312 / 0.1441; 0.0322 / 0.1388, 0.0309 / 0.1455); one-sided windows that
+    leave out the 3 / 6 centres next to the centre (the rounded toe; extrapolated): 0.0300 /
+    0.1355, 0.0310 / 0.1476 and 0.0305 / 0.1434, 0.0309 / 0.1521; a correlation c per path
+    measured from the scatter of 8 / 16 / 32-centre block means (c ≈ 1.7 / 15 / 60: the error
+    grows with the scale, and the blocks see the bead's shape): 0.0365 / 0.1525, 0.0431 /
+    0.1575; 0.0323 / 0.1390, 0.0307 / 0.1463; 0.0409 / 0.1490, 0.0324 / 0.1500. Where the tail
+    is left: 74 % of the centres above the p95 (both stripes) were already above it in the
+    re-measured centres before any smoothing. Cost: the final smoothing 3.3 → 8.5 ms
+    (H) and 2.4 → 6.4 ms (V) per stripe (jitted, a sunny development frame, interleaved, median
+    of 15, load ≈ 8 on the shared 2-core machine).
 
     Precision weights (`PRECISION_WEIGHTS`, off; issue 11, printed targets). Where the
     printed target's error comes from (development frames, seeds 7116–7117, 4 frames, errors
@@ -430,7 +468,40 @@ def second_pass(
         halves=REFINE_HALVES,
         sided=True,
     )
+    if LOCAL_WEIGHTS:
+        smoothed, _ = smooth_path(
+            jnp.nan_to_num(new),
+            valid,
+            scatter,
+            support=use,
+            correlation=REFINE_CORRELATION,
+            halves=REFINE_HALVES,
+            sided=True,
+            weights=_local_weights(jnp.nan_to_num(new), smoothed, use),
+        )
     return jnp.where(use, smoothed, pos)
+
+
+def _local_weights(new, smoothed, use):
+    """Per-centre weights of the second smoothing (`LOCAL_WEIGHTS`): the residual of the
+    first smoothing, r = new − smoothed, gives each centre's local variance v_j = G∗(r² ·
+    use) / G∗use (G a Gaussian of `LOCAL_SIGMA` centres along the path); the weight is
+    (median over the path of v / v_j)^`LOCAL_POWER`, within `LOCAL_BOUNDS`. A stretch of the
+    path whose centres scatter more (speckle, a glint's edge, a dark patch of a printed
+    target) counts less in the fits around it; a typical centre has weight ≈ 1, so the
+    ICI's noise model (scatter × factor) keeps its meaning."""
+    r = int(math.ceil(3 * LOCAL_SIGMA))
+    kern = np.exp(-0.5 * (np.arange(-r, r + 1) / LOCAL_SIGMA) ** 2)
+    kern = jnp.asarray(kern, new.dtype)
+    u = use.astype(new.dtype)
+    res = jnp.where(use, new - smoothed, 0.0)
+    v = jnp.convolve(res**2 * u, kern, mode="same") / jnp.maximum(
+        jnp.convolve(u, kern, mode="same"), 1e-6
+    )
+    med = jnp.nanmedian(jnp.where(use, v, jnp.nan))
+    med = jnp.where(jnp.isfinite(med), med, 1.0)
+    w = (med / jnp.maximum(v, 1e-12)) ** LOCAL_POWER
+    return jax.lax.stop_gradient(jnp.clip(w, *LOCAL_BOUNDS))
 
 
 def _clipped_near(excl, pos, *, sigma: float, axis: int):

@@ -448,16 +448,71 @@ def _local_residual(pos, valid, h):
     return jnp.where(ok & valid, pos - a, 0.0)
 
 
-def _path_scatter(pos, valid, lag):
-    """Robust std of the path about its local line: MAD of pos_j − (pos_{j−L} + pos_{j+L})/2."""
+#: Order of the difference behind `_path_scatter`: 2 (default) or 3. See there.
+SCATTER_ORDER = 2
+
+
+def _path_scatter(pos, valid, lag, order=None):
+    """Robust std of the path's centres about the smooth path, from the MAD of a difference
+    at lag L: order 2, d_j = pos_j − (pos_{j−L} + pos_{j+L})/2, Var(d) = 1.5 s² for
+    independent errors of std s; order 3, d_j = pos_j − 3 pos_{j+L} + 3 pos_{j+2L} −
+    pos_{j+3L}, Var(d) = (1 + 9 + 9 + 1) s² = 20 s². MAD → std by 1.4826. None:
+    `SCATTER_ORDER` (read when traced).
+
+    The second difference also measures the path's own shape: a curvature κ adds κL²/2 to
+    every term, so a path curved along its whole length reads as noisy, and the ICI
+    smoothing (`cslx.segmentation.path`), which takes this scatter as its noise, then
+    chooses windows too long for the curve. A sine of amplitude 40 px and period 500 px
+    (tests/segmentation/test_refine.py): median error after `refine.second_pass` 0.116 px
+    with order 2, 0.03 px with order 3 (straight: 0.004 px either way). The third
+    difference is zero on any quadratic.
+
+    Why order 2 stays the default (issue 11; development seeds 7100–7117, 18 conditions,
+    H / V median / p95 mm, all three uses — the centres' `sigma`, the first pass's and
+    the second pass's path smoothing): frames 0–1 (36 frames, `experiments.robust_extraction`)
+    0.0300 / 0.1347, 0.0313 / 0.1438 → 0.0300 / 0.1343, 0.0320 / 0.1453 (detection and gross
+    unchanged; clean H p95 0.096 → 0.091, green H 0.116 → 0.123, saturated V 0.127 → 0.133).
+    Order 3 only in the second pass's final smoothing, frames 0–1: 0.0301 / 0.1346, 0.0322 /
+    0.1438; fresh frame 2 (18 frames): 0.0290 / 0.1397, 0.0358 / 0.1517 → 0.0289 / 0.1399,
+    0.0373 / 0.1510. On the rendered stripes the curvature term is small (median ratio of
+    the two estimates 1.07 H / 1.09 V), but the windows' choice is sensitive to it: the
+    vertical stripe's median gains from the slightly larger noise (longer windows) that the
+    horizontal's p95 loses. With order 3 and the second pass's correlation c 8 / 10 / 12:
+    0.0302 / 0.1359, 0.0310 / 0.1432; 0.0303 / 0.1366, 0.0305 / 0.1408; 0.0309 / 0.1376,
+    0.0304 / 0.1409; Γ 2.5 / 3: 0.0304 / 0.1357, 0.0307 / 0.1420; 0.0319 / 0.1389, 0.0304
+    / 0.1467; lag 8 / 16 / 24 instead of 12: 0.0357 / 0.1533, 0.0424 / 0.1594; 0.0309 /
+    0.1363, 0.0310 / 0.1439; 0.0328 / 0.1411, 0.0310 / 0.1528 (frame 2, lag 16: 0.0296 /
+    0.1435, 0.0327 / 0.1506); with `refine.LOCAL_WEIGHTS` (final smoothing only), order 2 / 3:
+    0.0297 / 0.1336, 0.0312 / 0.1393 and 0.0295 / 0.1323, 0.0316 / 0.1388 (frame 2: 0.0282 /
+    0.1346, 0.0347 / 0.1495 and 0.0281 / 0.1357, 0.0377 / 0.1511). No setting improves both
+    stripes. Flat wall (seeds 41–46, no
+    curvature at all), order 3: worst RMS 0.066 → 0.065 px, but 19 of 24 frame-stripes
+    with a larger RMS (largest distance 0.166 → 0.253 px, saturated 41 H); none beyond 0.5 px.
+
+    Most of the two estimates' difference on rendered frames is not curvature but the
+    errors' correlation along the path, to which the two differences respond differently:
+    unit-std noise smoothed along the path by a Gaussian of σ 3 / 6 / 12 centres (the second
+    pass averages along σ 6) reads 1.01 / 0.72 / 0.34 with order 2 and 1.01 / 0.68 / 0.24
+    with order 3 (straight path, lag 12). Both underestimate a correlated error's std; the
+    second pass's correlation c (`refine.REFINE_CORRELATION`) was chosen with order 2.
+    """
+    order = SCATTER_ORDER if order is None else order
     n = pos.shape[0]
     j = jnp.arange(n)
-    lo, hi = jnp.clip(j - lag, 0, n - 1), jnp.clip(j + lag, 0, n - 1)
-    ok = valid & valid[lo] & valid[hi] & (j - lag >= 0) & (j + lag < n)
-    d = jnp.where(ok, pos - 0.5 * (pos[lo] + pos[hi]), 0.0)
-    mad = _masked_median(jnp.abs(d), ok)
-    # Var(d) = 1.5 Var(pos) for independent errors at lag L; MAD → std by 1.4826.
-    return lax.stop_gradient(1.4826 * mad / math.sqrt(1.5))
+    if order == 2:
+        lo, hi = jnp.clip(j - lag, 0, n - 1), jnp.clip(j + lag, 0, n - 1)
+        ok = valid & valid[lo] & valid[hi] & (j - lag >= 0) & (j + lag < n)
+        d = pos - 0.5 * (pos[lo] + pos[hi])
+        var = 1.5
+    elif order == 3:
+        i1, i2, i3 = (jnp.clip(j + i * lag, 0, n - 1) for i in (1, 2, 3))
+        ok = valid & valid[i1] & valid[i2] & valid[i3] & (j + 3 * lag < n)
+        d = pos - 3.0 * pos[i1] + 3.0 * pos[i2] - pos[i3]
+        var = 20.0
+    else:
+        raise ValueError(f"order must be 2 or 3, got {order!r}")
+    mad = _masked_median(jnp.abs(jnp.where(ok, d, 0.0)), ok)
+    return lax.stop_gradient(1.4826 * mad / math.sqrt(var))
 
 
 def _masked_median(x, mask):

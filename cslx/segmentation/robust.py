@@ -118,6 +118,10 @@ averages out): the goal's median is near that floor even without speckle.
    0.242 → 0.241 px. Cost: the smoothing 1.0 → 3.7 ms per stripe (load 11; whole frames
    under that load scattered 47–133 ms per frame and stripe, before and after alike).
    Where they hold, speckle-weighted profile fits (offsets from the path) replace its centres.
+   The final smoothing is run again with each centre weighted by its local precision
+   (`refine.LOCAL_WEIGHTS`): development frames (36), H / V median / p95 0.0300 / 0.1347,
+   0.0313 / 0.1438 → 0.0297 / 0.1336, 0.0312 / 0.1398 mm; fresh frame 2 (18) 0.0290 /
+   0.1397, 0.0358 / 0.1517 → 0.0283 / 0.1346, 0.0346 / 0.1495; +4–5 ms per stripe.
 Cost per frame and stripe, warm, horizontal / vertical,
 wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
 same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the

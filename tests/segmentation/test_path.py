@@ -94,3 +94,39 @@ def test_one_sided_windows_reach_up_to_the_corners():
     rms = lambda e: float(np.sqrt(np.mean(np.concatenate(e) ** 2)))  # noqa: E731
     assert rms(both) < 0.9 * rms(sym)  # 0.80 at this seed
     assert rms(flat_both) < 1.1 * rms(flat_sym)  # 1.03
+
+
+def test_unit_weights_are_the_unweighted_fit():
+    rng = np.random.default_rng(4)
+    pos, _ = _kinked(rng)
+    valid = np.ones(len(pos), bool)
+    valid[100:110] = False
+    args = (jnp.asarray(pos), jnp.asarray(valid), 0.08)
+    plain, f0 = smooth_path(*args, sided=True)
+    ones, f1 = smooth_path(*args, sided=True, weights=jnp.ones(len(pos)))
+    np.testing.assert_allclose(np.asarray(ones), np.asarray(plain), atol=1e-4)
+    np.testing.assert_allclose(np.asarray(f1), np.asarray(f0), rtol=1e-4)
+
+
+def test_weights_keep_a_noisy_stretch_out_of_its_quiet_neighbours():
+    """A stretch whose centres scatter 8× more (a glint's edge, a dark patch): with weights
+    ≈ its relative precision^½ (1/8) the fits of the quiet centres next to it lean on
+    their own side (RMS 0.018 → 0.007 px), and the stretch itself is no worse."""
+    n = 640
+    j = np.arange(n)
+    noisy = (j >= 250) & (j < 330)
+    near = np.r_[200:250, 330:380]
+    err = {"plain": [], "weighted": []}
+    for seed in range(6):
+        rng = np.random.default_rng(10 + seed)
+        truth = 300.0 + 0.05 * j
+        pos = truth + np.where(noisy, 0.4, 0.05) * rng.normal(size=n)
+        args = (jnp.asarray(pos, jnp.float32), jnp.ones(n, bool), 0.1)
+        w = jnp.asarray(np.where(noisy, 1 / 8.0, 1.0), jnp.float32)
+        err["plain"].append(np.asarray(smooth_path(*args, sided=True)[0]) - truth)
+        err["weighted"].append(np.asarray(smooth_path(*args, sided=True, weights=w)[0]) - truth)
+    rms = {
+        k: lambda sl, v=v: float(np.sqrt(np.mean(np.stack(v)[:, sl] ** 2))) for k, v in err.items()
+    }
+    assert rms["weighted"](near) < 0.5 * rms["plain"](near)
+    assert rms["weighted"](noisy) < 1.05 * rms["plain"](noisy)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -294,3 +295,26 @@ def test_drop_stray_removes_far_pieces_across_gaps():
     v = valid.copy()
     v[248:260] = v[300:312] = False
     assert np.asarray(drop_stray(long, v))[260:300].all()
+
+
+def test_path_scatter_third_difference_measures_noise_not_curvature():
+    """`_path_scatter(order=3)` is the std of the centres' noise: a path curved along its
+    whole length reads the same as a straight one. The second difference (order 2) adds
+    κL²/2 (κ = 0.01 px⁻¹, L = 12: 0.72 px) and measures the curve instead."""
+    from cslx.segmentation.ridges import _path_scatter
+
+    rng = np.random.default_rng(3)
+    n, s = 640, 0.1
+    u = np.arange(n, dtype=float)
+    noise = rng.normal(0.0, s, n)
+    valid = np.ones(n, bool)
+    valid[rng.choice(n, 40, replace=False)] = False
+    for shape in (0.0 * u, 0.005 * (u - 320.0) ** 2, 0.3 * u - 0.002 * (u - 100.0) ** 2):
+        pos = jnp.asarray(shape + noise)
+        assert 0.85 * s < float(_path_scatter(pos, jnp.asarray(valid), 12, order=3)) < 1.15 * s
+    straight = float(_path_scatter(jnp.asarray(noise), jnp.asarray(valid), 12, order=2))
+    assert 0.85 * s < straight < 1.15 * s
+    curved = jnp.asarray(0.005 * (u - 320.0) ** 2 + noise)
+    assert float(_path_scatter(curved, jnp.asarray(valid), 12, order=2)) > 5 * s
+    # noiseless curve: nothing left to measure
+    assert float(_path_scatter(jnp.asarray(0.005 * u**2), jnp.ones(n, bool), 12, order=3)) < 1e-3
