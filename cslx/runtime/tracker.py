@@ -269,7 +269,13 @@ def tracking_config():
     false T identical. A ratio of 0.4 did more for shadow (0.091 / 0.468 / 0.282; 7305 beside
     shadow 0.203 / 0.886 / 0.866) but 7305 flank glare newly missed the heading goal (0.438
     → 0.519°); 0.6 fixed 1202 only (7305 beside shadow 0.280 / 1.08 / 1.37); weight 0.05
-    instead of 0 at 0.4 left 7305 beside shadow at 0.315 / 0.928 / 1.55.
+    instead of 0 at 0.4 left 7305 beside shadow at 0.315 / 0.928 / 1.55. Figure 22's closed
+    loop, dev seed 2201 (`experiments/fig22_tracking.py`, shadow and glare, 31f6b0d → this):
+    both turned; shadow steady error mean / max 0.078 / 0.220 → 0.087 / 0.220 mm, after the
+    turn 0.035 / 0.065 → 0.048 / 0.131, estimation error mean 0.081 → 0.092 mm; glare steady
+    0.081 / 0.214 → 0.125 / 0.630 mm (the turn's end 0.76 mm past the T against 0.16 mm
+    short, junction frames 51 → 35), estimation error mean / max 0.066 / 0.195 → 0.073 /
+    0.254 mm: within the goals, but no better there.
     """
     from .pipeline import PipelineConfig
 
