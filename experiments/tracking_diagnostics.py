@@ -250,6 +250,27 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   without them the first two left (frames 19–20, measured 25–28 mm wide for an 18 mm bar,
   4 mm short) confirmed the T 3.0 mm short; the measured width does not tell a cut bead
   from a whole one, so a rule on it is the open step.
+- `KalmanConfig.junction_fuse` "mean" against "median" (48 dev runs, one process at
+  31f6b0d, ``--variant kalman.junction_fuse=mean``): T recall and false T identical in
+  every run; the reported T's mean |error| over the reporting frames (``t_err_mean``),
+  averaged over the runs, clean 0.326 → 0.430, sunny 0.405 → 0.459, glare 0.369 → 0.413,
+  shadow 0.318 → 0.385 mm (worse in 27 of the 48 runs, better in 21): the median stays the default.
+- 7305 beside shadow (heading 2.04°, offset mean 0.387, max 1.07 mm), frame by frame: a
+  shadow edge runs along the horizontal stripe over the bead's right flank and the plate
+  beside it (image columns ≈ 306–348 in frame 1). Below the edge the plate and bead are
+  sunlit: R clips across the stripe and G rises 50 → 220 within its rows, so R − G there is
+  255 − G, the edge itself, and the ridge sits on the stripe's shadow side: heights 0.4–1.4
+  mm low (below the plate next to the toe), the cap fitted narrower (13–15 mm for 16.3) and
+  the bead −0.8 to −1.1 mm off in frames 1–7, +0.2 to +0.57 mm in 11–20 as the edge moved
+  over the other flank. The heading window (22 mm span from frame 15) takes that drift of
+  the bias for a slope: 5.1° against 1.1° true at frame 15, and the biased centres stay in
+  the 60 mm window until frame 41 (error then < 0.25°). Not the window's fit: a
+  repeated-median start for the biweight (Siegel; 50 % breakdown) changed the run's
+  heading by 0.004° (the centres of frames 8–20 are themselves biased, 1.4° of slope). Not
+  the cap fit: leaving points below the plate (h < −kσ) out of it moved the bead ≤ 0.07 mm.
+  Fixed where it arises: `background_step` measures the subtracted channel's change across
+  the stripe, and the tracker weights such centres 0 in the cap fit
+  (`cslx.runtime.tracker.tracking_config`, the 48-run evidence there).
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
@@ -348,7 +369,12 @@ def diagnose(tracker, seq: dict, worst: int = 5, verbose: bool = True) -> dict:
     s = score(obs, seq)
     em = np.array([r["e_meas"] for r in rows])
     z = np.array([r["e_head"] / r["sd_head"] for r in rows])
+    # how close the T reports are: |reported − true| x_r over the frames reporting it
+    jerr = np.abs(np.array([r["jx"] - r["tj"] for r in rows]))
     s.update(
+        t_reports=int(np.isfinite(jerr).sum()),
+        t_err_mean=float(np.nanmean(jerr)) if np.isfinite(jerr).any() else math.nan,
+        t_err_max=float(np.nanmax(jerr)) if np.isfinite(jerr).any() else math.nan,
         head_z_rms=float(np.sqrt(np.nanmean(z * z))),
         meas_mean=float(np.nanmean(np.abs(em))),
         meas_max=float(np.nanmax(np.abs(em))),
@@ -378,9 +404,9 @@ def variant_config(spec: str):
         return config
     for item in spec.split(","):
         key, value = item.split("=")
-        value = float(value) if "." in value or "e" in value else int(value)
         if key.startswith("kalman."):
             continue
+        value = float(value) if "." in value or "e" in value else int(value)
         if key.startswith("weld."):
             weld = dataclasses.replace(config.weld, **{key[5:]: value})
             config = dataclasses.replace(config, weld=weld)
@@ -395,8 +421,14 @@ def variant_kalman(spec: str):
 
     from cslx.runtime.line_filter import KalmanConfig
 
+    def value(v: str):
+        try:
+            return float(v)
+        except ValueError:
+            return v  # a string option, e.g. kalman.junction_fuse=mean
+
     items = [i.split("=") for i in spec.split(",") if i.startswith("kalman.")]
-    return dataclasses.replace(KalmanConfig(), **{k[7:]: float(v) for k, v in items})
+    return dataclasses.replace(KalmanConfig(), **{k[7:]: value(v) for k, v in items})
 
 
 def summary(rows: list[dict]) -> str:
@@ -475,6 +507,9 @@ def main() -> None:
                         "heading_pct",
                         "t_recall_pct",
                         "t_false",
+                        "t_reports",
+                        "t_err_mean",
+                        "t_err_max",
                         "meas_mean",
                         "meas_max",
                         "n_meas_05",

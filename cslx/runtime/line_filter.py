@@ -104,7 +104,11 @@ class KalmanConfig:
     junction_keep_clear: int = 30
     # how those sightings make one position: "median", or "mean" (of those within
     # `junction_tol_mm` of the median; `JunctionTrack._fused`). Issue 12, Figure 22 dev
-    # seeds 2201/2203/2204: not the default (offline evidence only, see the branch report)
+    # seeds 2201/2203/2204: not the default (offline evidence only, see the branch report).
+    # 48 dev T approaches (experiments/tracking_diagnostics.py): T recall and false T the
+    # same in every run, the reported T farther off ("mean" → mean |error| over the
+    # reporting frames, averaged per kind: clean 0.326 → 0.430, sunny 0.405 → 0.459, glare
+    # 0.369 → 0.413, shadow 0.318 → 0.385 mm)
     junction_fuse: str = "median"
     # A crossing bead lower than this is not a weld: on rendered straight-weld frames the
     # full-frame pass showed 0.6 mm, 13 mm wide bumps on the bare plate (segmentation

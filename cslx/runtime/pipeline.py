@@ -46,7 +46,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
-from ..segmentation.clipped import centre_runs
+from ..segmentation.clipped import background_step, centre_runs
 from ..segmentation.med import initial_filter, med, med_apply
 from ..segmentation.med_bands import band_snr_scale, first_peak
 from ..segmentation.steger import Centres, steger_centres
@@ -392,11 +392,17 @@ def _clip_weights(rgb, ch: Centres, config: PipelineConfig, dtype):
     ``config.clip_weight_run`` px down its column, or on a clipped run holding a white pixel
     (`cslx.segmentation.clipped.centre_runs`): there the stripe's light was not measured and
     the centre lies where the clipped-core fill put the ridge (`PipelineConfig`)."""
-    if config.clip_weight == 1.0 or not config.fill_clipped:
-        return None
-    length, white = centre_runs(rgb, ch.pos, ch.valid, config.weights, axis=0)
-    odd = (length > config.clip_weight_run) | (white & (length > 0))
-    return jnp.where(odd, config.clip_weight, 1.0).astype(dtype)
+    w = None
+    if config.clip_weight != 1.0 and config.fill_clipped:
+        length, white = centre_runs(rgb, ch.pos, ch.valid, config.weights, axis=0)
+        odd = (length > config.clip_weight_run) | (white & (length > 0))
+        w = jnp.where(odd, config.clip_weight, 1.0).astype(dtype)
+    if config.edge_weight != 1.0:
+        # a shadow edge or glint across the stripe (`PipelineConfig.edge_weight`)
+        step = background_step(rgb, ch.pos, ch.valid, config.weights, config.edge_weight_gap)
+        e = jnp.where(step > config.edge_weight_ratio, config.edge_weight, 1.0).astype(dtype)
+        w = e if w is None else w * e
+    return w
 
 
 def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: bool):

@@ -147,6 +147,12 @@ class PipelineConfig(eqx.Module):
         ``clip_weight_run`` px down its column or on a clipped run with a white pixel
         (`cslx.runtime.pipeline._clip_weights`); 1 = off (the paper's pipeline). Evidence
         in `cslx.runtime.tracker.tracking_config`.
+    edge_weight / edge_weight_ratio / edge_weight_gap: the weight, in the same fit, of a
+        centre where the subtracted channels (the background's estimate) change across the
+        stripe by more than ``edge_weight_ratio`` × the laser channel at the centre, sampled
+        ``edge_weight_gap`` px to either side (`cslx.segmentation.clipped.background_step`:
+        a shadow edge or glint along the stripe); 1 = off (the paper's pipeline). Evidence
+        in `cslx.runtime.tracker.tracking_config` (0, 0.5, 6 px there).
     band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
         convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
         `fill_clipped`; equal to the bands of the converted frame). False converts the
@@ -197,6 +203,9 @@ class PipelineConfig(eqx.Module):
     clip_dome_along: int = eqx.field(static=True, default=0)
     clip_weight: float = eqx.field(static=True, default=1.0)
     clip_weight_run: int = eqx.field(static=True, default=7)
+    edge_weight: float = eqx.field(static=True, default=1.0)
+    edge_weight_ratio: float = eqx.field(static=True, default=0.5)
+    edge_weight_gap: int = eqx.field(static=True, default=6)
     band_first: bool = eqx.field(static=True, default=True)
     first_pass_stride: int = eqx.field(static=True, default=4)
     stats_stride: int = eqx.field(static=True, default=4)

@@ -80,6 +80,36 @@ def centre_runs(rgb, pos, valid, weights, *, axis: int = 0, half: int = MAX_RUN 
     return length, jnp.any(white & in_run, axis=0)
 
 
+def background_step(rgb, pos, valid, weights, gap: int):
+    """Per horizontal-stripe centre: how much the background changes across the stripe.
+
+    The colour image of Eq. (8) subtracts the channels weighted < 0 (G in R − G) as the
+    ambient light's estimate under the laser's channel. Where a shadow edge (or a glint)
+    crosses the stripe, those channels step from one side of the stripe to the other, the
+    subtraction no longer cancels the background, and with the laser's channel clipped the
+    colour image's ridge follows the edge rather than the light (rendered shadow, issue 12:
+    dev seed 7305, beside, frames 1–7, bead-flank centres 0.4–1.4 mm low in height, the bead
+    1 mm off). Returns (N,) |b(r + gap) − b(r − gap)| / max(laser channels at r, 1): b the
+    sum of the subtracted channels (|weight| each; all channels when none is subtracted),
+    r the centre's row, sampled ``gap`` px beyond it to each side (rows clamped to the
+    frame); 0 where the centre is not valid.
+    """
+    img = jnp.asarray(rgb).astype(jnp.float32)
+    n = img.shape[0]
+    neg = [(-w if w < 0 else 0.0) for w in weights]
+    pos_w = [(w if w > 0 else 0.0) for w in weights]
+    bw = jnp.asarray(neg if any(neg) else [1.0, 1.0, 1.0], jnp.float32)
+    lw = jnp.asarray(pos_w if any(pos_w) else [1.0, 1.0, 1.0], jnp.float32)
+    r0 = jnp.round(jnp.where(valid, pos, 0.0)).astype(jnp.int32)
+    cols = jnp.arange(img.shape[1], dtype=jnp.int32)
+
+    def at(rows, w):
+        return img[jnp.clip(rows, 0, n - 1), cols] @ w
+
+    step = jnp.abs(at(r0 + gap, bw) - at(r0 - gap, bw))
+    return jnp.where(valid, step / jnp.maximum(at(r0, lw), 1.0), 0.0)
+
+
 @functools.partial(
     jax.jit,
     static_argnames=("axis", "max_run", "dome", "dome_min_run", "dome_white_share", "dome_along"),

@@ -173,3 +173,61 @@ def test_centre_runs_length_and_white():
     )
     np.testing.assert_array_equal(np.asarray(lt), length)
     np.testing.assert_array_equal(np.asarray(wt), white)
+
+
+def _stripe_over_shadow_edge(h=40, w=40, row=20.0):
+    """A red stripe along the rows (row ``row``, σ 1.5 px, its core clipped in R) over grey
+    plate: columns < w/2 in uniform shade (grey 30), columns ≥ w/2 across a shadow edge that
+    runs along the stripe (grey 30 above ``row``, 200 below; rendered shadow, issue 12)."""
+    r = np.arange(h, dtype=float)[:, None]
+    laser = 400.0 * np.exp(-0.5 * ((r - row) / 1.5) ** 2) * np.ones((1, w))
+    grey = np.full((h, w), 30.0)
+    grey[int(row) + 1 :, w // 2 :] = 200.0
+    rgb = np.stack([grey + laser, grey + 0.07 * laser, grey + 0.04 * laser], -1)
+    return np.clip(np.round(rgb), 0, 255).astype(np.uint8)
+
+
+def test_background_step_sees_a_shadow_edge_across_the_stripe():
+    """`background_step` (issue 12): the subtracted channel (G of R − G) changes across the
+    stripe by ≈ 170 grey levels against a clipped laser channel (255) where the shadow edge
+    runs along it, and by nothing on uniform shade; 0 for a missing centre."""
+    from cslx.segmentation.clipped import background_step
+
+    rgb = _stripe_over_shadow_edge()
+    pos = np.full(rgb.shape[1], 20.3)
+    valid = np.ones(rgb.shape[1], bool)
+    valid[3] = False
+    step = np.asarray(background_step(jnp.asarray(rgb), jnp.asarray(pos), jnp.asarray(valid), W, 6))
+    assert np.all(step[:20] < 0.05)
+    assert np.all(step[20:] > 0.5), step[20:]
+    assert step[3] == 0.0
+
+
+def test_edge_weight_drops_centres_on_a_shadow_edge_from_the_cap_fit():
+    """`PipelineConfig.edge_weight` (issue 12): the horizontal stripe's centres where the
+    background steps across the stripe get that weight in the bead's cap fit, the others 1;
+    with the weight 1 (and no clip weight) there are no weights at all."""
+    from types import SimpleNamespace
+
+    from cslx.runtime.pipeline import _clip_weights
+
+    rgb = jnp.asarray(_stripe_over_shadow_edge())
+    ch = SimpleNamespace(pos=jnp.full(40, 20.3), valid=jnp.ones(40, bool))
+    cfg = PipelineConfig(use_med=False, edge_weight=0.0, edge_weight_ratio=0.4)
+    w = np.asarray(_clip_weights(rgb, ch, cfg, jnp.float32))
+    np.testing.assert_array_equal(w, np.r_[np.ones(20), np.zeros(20)])
+    assert _clip_weights(rgb, ch, PipelineConfig(use_med=False), jnp.float32) is None
+
+
+def test_tracking_config_drops_centres_on_a_shadow_edge():
+    """The tracker's pipeline (`cslx.runtime.tracker.tracking_config`) weights the centres on
+    the shadow edge 0 in the bead's fit and leaves those on uniform shade at 1."""
+    from types import SimpleNamespace
+
+    from cslx.runtime.pipeline import _clip_weights
+    from cslx.runtime.tracker import tracking_config
+
+    rgb = jnp.asarray(_stripe_over_shadow_edge())
+    ch = SimpleNamespace(pos=jnp.full(40, 20.3), valid=jnp.ones(40, bool))
+    w = np.asarray(_clip_weights(rgb, ch, tracking_config(), jnp.float32))
+    np.testing.assert_array_equal(w, np.r_[np.ones(20), np.zeros(20)])
