@@ -227,70 +227,12 @@ class Observation:
 
 
 def tracking_config():
-    """The tracker's default pipeline: `PipelineConfig` without MED (Steger on R − G).
+    """The tracker's default pipeline settings: `cslx.runtime.pipeline_config.tracking_config`
+    (its docstring holds the evidence for each setting). Imported on call, so importing the
+    tracker does not import JAX."""
+    from .pipeline_config import tracking_config as default
 
-    Why (issue 12; rendered passes at dev seed 1201, 48 frames per nuisance kind, odometry,
-    `experiments/tracking_sequences.py`): offset error mean / max with MED 0.17 / 0.40 mm
-    (glare), 0.089 / 0.22 (shadow); without 0.080 / 0.32, 0.075 / 0.18 (clean 0.076 / 0.19).
-    Centres in bead columns (seed 101): median 0.150 → 0.125 px (clean), 0.38 → 0.13 px (sun),
-    where MED's filter moves the stripe under the bead's sheen. MED stays the default of
-    `PipelineConfig` (the paper's method, Table 6).
-
-    The clipped-core fill is domed (`PipelineConfig.clip_dome*`: height 1, down the columns
-    only, runs longer than 7 px, at most half of a run's pixels white): on sunlit bead
-    flanks the red channel clips over 8–14 rows, and the flat fill left a plateau with no
-    ridge for Steger. Over the 48 dev T approaches (seeds 7301, 7302, 7305, 1201–1203;
-    `experiments/tracking_diagnostics.py`) the runs missing an issue-12 goal went, flat →
-    domed: offset mean 10 → 2, offset max 9 → 3, heading 11 → 9, estimate 1 → 0, false T
-    1 → 1, T recall 0 → 0; sunny offset mean 0.218 → 0.125 mm, shadow 0.143 → 0.122 mm,
-    glare 0.101 → 0.116 mm (worse, but within its goals in as many runs).
-
-    Centres on a clipped run longer than 7 px or holding a white pixel weigh 0.1 in the
-    bead's fits (`PipelineConfig.clip_weight`): the fill, not the light, placed them (bead
-    columns 0.3–0.9 mm off in height against the renderer's exact stripe, others 0.12–0.14).
-    Same 48 runs: missing a goal 15 → 14 (offset max 3 → 2, the rest the same runs); offset
-    mean sunny 0.125 → 0.111, glare 0.116 → 0.105, shadow 0.122 → 0.117 mm, worst max sunny
-    1.51 → 0.86 mm; heading sunny 0.328 → 0.341°, shadow 0.480 → 0.451°; clean unchanged.
-
-    Centres where the subtracted channel (G) steps across the stripe by more than 0.5 × the
-    laser channel at the centre, 6 px to either side, weigh 0 in the same fit
-    (`PipelineConfig.edge_weight*`, `cslx.segmentation.clipped.background_step`): where a
-    shadow edge runs along the stripe, R clips on the sunlit side and R − G there is
-    255 − G, the background's edge, so the ridge sits on the stripe's shadow side (dev seed
-    7305 beside shadow, frames 1–7: the bead's flank 0.4–1.4 mm low in height over the
-    edge, the bead 1 mm off, and the heading window then 3–5° off for 30 frames). 48 dev
-    T approaches (seeds 7301, 7302, 7305, 1201–1203; experiments/tracking_diagnostics.py,
-    one process per seed block): runs missing a goal 4 → 3 (goal misses 7 → 6; 1202 beside
-    shadow heading 0.510 → 0.176°; 7305 beside shadow offset mean / max / heading 0.387 /
-    1.07 / 2.04 → 0.234 / 1.02 / 1.09, still missing; none newly missed); per kind offset
-    mean / max averaged over the runs mm, heading mean °: shadow 0.111 / 0.493 / 0.413 →
-    0.094 / 0.475 / 0.306, glare 0.1005 / 0.455 / 0.291 → 0.1008 / 0.451 / 0.283 (7305
-    beside glare offset mean 0.117 → 0.137 mm), clean and sunny identical; T recall and
-    false T identical. A ratio of 0.4 did more for shadow (0.091 / 0.468 / 0.282; 7305 beside
-    shadow 0.203 / 0.886 / 0.866) but 7305 flank glare newly missed the heading goal (0.438
-    → 0.519°); 0.6 fixed 1202 only (7305 beside shadow 0.280 / 1.08 / 1.37); weight 0.05
-    instead of 0 at 0.4 left 7305 beside shadow at 0.315 / 0.928 / 1.55. Figure 22's closed
-    loop, dev seed 2201 (`experiments/fig22_tracking.py`, shadow and glare, 31f6b0d → this):
-    both turned; shadow steady error mean / max 0.078 / 0.220 → 0.087 / 0.220 mm, after the
-    turn 0.035 / 0.065 → 0.048 / 0.131, estimation error mean 0.081 → 0.092 mm; glare steady
-    0.081 / 0.214 → 0.125 / 0.630 mm (the turn's end 0.76 mm past the T against 0.16 mm
-    short, junction frames 51 → 35), estimation error mean / max 0.066 / 0.195 → 0.073 /
-    0.254 mm: within the goals, but no better there.
-    """
-    from .pipeline import PipelineConfig
-
-    return PipelineConfig(
-        use_med=False,
-        clip_dome=1.0,
-        clip_dome_axes=1,
-        clip_dome_min_run=7,
-        clip_dome_white=0.5,
-        clip_weight=0.1,
-        clip_weight_run=7,
-        edge_weight=0.0,
-        edge_weight_ratio=0.5,
-        edge_weight_gap=6,
-    )
+    return default()
 
 
 def _logger(log) -> Callable[[str], None]:

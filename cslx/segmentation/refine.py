@@ -441,27 +441,17 @@ def second_pass(
       slightly skewed, and the multiplicative speckle turns that into the larger bias (a
       second-order effect of the estimators under multiplicative noise, presumably). Open:
       an estimator unbiased under multiplicative noise of a skewed profile.
-    - Where the vertical stripe loses (frames 0–1, 36 frames, as used: H / V median 0.0297 /
-      0.0312 mm, p95 0.134 / 0.140; frame 2, 18 frames: 0.0283 / 0.0346, 0.135 / 0.150). In
-      pixels V is the better stripe (median 0.026 against 0.029 px); its plane maps a pixel to
-      more millimetres (per-frame median ratio 1.05–1.35, median 1.19; H 0.90–1.13, median
-      1.01). Of its pixel error, the ends weigh most: within 12 / 12–48 / 48–96 rows of the
-      top or bottom border 0.053 / 0.037 / 0.024 px against 0.024 px further in; the rows
-      within 48 of either border hold 20 % of its centres (H: 15 % within 48 columns, ≈ 0.038
-      px within 12). The top end is worse than the bottom (0.065 / 0.043 px within 12 rows)
-      and the signed error there averages −0.03 to 0 px (sign of the side of the image centre,
-      i.e. of the lens distortion's bend): scatter, not a bias. The fit's ρ (`profile.RHO`;
-      with `FIT_CHI2` 2 kept, a larger ρ also lets the fit hold on more centres): ρ 0.25 / 0.5
-      / 0.7 / 1.0: frames 0–1 H 0.0302 / 0.0292 / 0.0296 / 0.0300 mm (p95 0.133 / 0.133 /
-      0.132 / 0.135), V 0.0316 / 0.0290 / 0.0293 / 0.0298 (p95 0.142 / 0.140 / 0.145 / 0.145);
-      frame 2 H 0.0288 / 0.0282 / 0.0281 / 0.0292 (p95 0.138 / 0.136 / 0.135 / 0.137), V
-      0.0356 / 0.0353 / 0.0330 / 0.0325 (p95 0.151 / 0.144 / 0.145 / 0.145). The V median
-      drops on one set or both, but the V p95 on frames 0–1 rises (0.7: sunny V 0.243 → 0.251,
-      printed V 0.188 → 0.197) and printed H loses (0.7: 0.0367 → 0.0382, frame 2 0.0283 →
-      0.0336): not kept. With `FIT_CHI2` scaled by (0.35 / ρ)² (the gate held fixed): ρ 0.5
-      frames 0–1 H / V 0.0300 / 0.0298 mm but frame 2 0.0292 / 0.0386 (p95 0.138 / 0.160); ρ
-      0.7 every figure worse (V 0.0377 / 0.0439): the gain above comes with the looser gate,
-      whose p95 cost was measured before (`FIT_CHI2` 3 / 5).
+    - Where the vertical stripe loses (dev frames 0–1: H / V median 0.0297 / 0.0312 mm;
+      frame 2: 0.0283 / 0.0346). In pixels V is the better stripe (0.026 against 0.029 px);
+      its plane maps a pixel to more millimetres (per-frame median ratio 1.19; H 1.01). Its
+      ends scatter most: 0.053 / 0.037 px within 12 / 12–48 rows of the top or bottom border
+      against 0.024 px further in (20 % of its centres lie within 48 rows of a border), with
+      a signed mean of −0.03 to 0 px: scatter, not a bias. The fit's ρ (`profile.RHO`) 0.25 /
+      0.5 / 0.7 / 1.0 with `FIT_CHI2` 2: V median frames 0–1 0.0316 / 0.0290 / 0.0293 /
+      0.0298, frame 2 0.0356 / 0.0353 / 0.0330 / 0.0325 mm, but the V p95 on frames 0–1 rises
+      (0.7: 0.140 → 0.145) and printed H loses (0.7: 0.0367 → 0.0382): not kept. With the
+      gate held fixed (`FIT_CHI2` × (0.35 / ρ)²) every figure gets worse at ρ 0.7 (V 0.0377 /
+      0.0439): the gain came with the looser gate, whose p95 cost was measured before.
     """
     sa = SIGMA_REFINE if sigma_along is None else float(sigma_along)
     use = valid & ~bridged
