@@ -249,7 +249,18 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   toes 218.8–219.4 mm against an end at 219.3–219.7) were within 0.5 mm of the truth, and
   without them the first two left (frames 19–20, measured 25–28 mm wide for an 18 mm bar,
   4 mm short) confirmed the T 3.0 mm short; the measured width does not tell a cut bead
-  from a whole one, so a rule on it is the open step.
+  from a whole one, so a rule on it is the open step. Frame by frame (frames 7–12) glare gave
+  one sighting a frame, scattered: 199.4 (24 mm wide), 161.4, 209.7, 211.0 (15 mm wide, at
+  the bar's near toe, 210.9 mm), 105.7, 113.1 mm; only frames 9 and 10 agreed. Confirming
+  on three agreeing sightings (`KalmanConfig.junction_confirm_min` 3, now the default)
+  removed it with no run gaining a miss (48 dev runs before / after; T recall one frame
+  lower in 5 runs, minimum 93.1 %).
+- 7305 flank glare's offset max (1.46 mm): frame 0, the measurement itself (e_meas −1.43
+  mm; the filter starts from it; frames 1–2 −0.45 / −0.41, from frame 3 on ≤ 0.24 mm). The
+  bead measured 13.1 mm wide (truth 16.3 mm, 20 % narrow, just inside `width_tol` 0.2 and
+  with no width history on a first frame) where glints crowd the bead's left flank at the
+  horizontal stripe and the vertical stripe crosses the bead 4.2 mm to the side (cross
+  4.17 mm, 2.7 / 2.6 mm on frames 1–2). No fix tried.
 - `KalmanConfig.junction_fuse` "mean" against "median" (48 dev runs, one process at
   31f6b0d, ``--variant kalman.junction_fuse=mean``): T recall and false T identical in
   every run; the reported T's mean |error| over the reporting frames (``t_err_mean``),

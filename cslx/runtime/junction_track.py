@@ -6,8 +6,9 @@ The crossing weld does not move on the plate, so its sightings, each moved by th
 odometry since it was made (x −= d per frame), stay at one x_r. `JunctionTrack` (cslx's own
 rule; the paper gives none):
 
-- confirm: a sighting that agrees within `tol_mm` with an earlier one of the last `window`
-  frames confirms a junction there;
+- confirm: a sighting that agrees within `tol_mm` with `confirm_min` − 1 earlier ones of
+  the last `window` frames confirms a junction there (`KalmanConfig.junction_confirm_min`
+  3: two chance-agreeing glare sightings made a false T at dev seed 7305, flank, glare);
 - hold: a confirmed junction is reported, at the median of its supporting sightings (moved
   to now); once `hold_min_support` sightings support it (before that only in frames with a
   sighting), for up to `hold` frames after its last supporting sighting while it lies inside
@@ -80,6 +81,7 @@ class JunctionTrack:
         min_clear: int = 3,
         keep_clear: int | None = None,
         fuse: str = "median",
+        confirm_min: int = 2,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
@@ -91,6 +93,7 @@ class JunctionTrack:
         if fuse not in ("median", "mean"):
             raise ValueError(f"fuse must be 'median' or 'mean', got {fuse!r}")
         self.fuse = fuse
+        self.confirm_min = max(int(confirm_min), 2)
         self.stripe_y = 0.0  # y_r of the vertical stripe (mm), from `update`
         self.reset()
 
@@ -166,7 +169,11 @@ class JunctionTrack:
                 self.support.append((now, x))
                 self._keep_clear([(now, x)])
                 self.last = now
-            elif agree and (not held or x > self.x + self.tol) and self._fresh(x, agree):
+            elif (
+                len(agree) + 1 >= self.confirm_min
+                and (not held or x > self.x + self.tol)
+                and self._fresh(x, agree)
+            ):
                 self.support = [*agree, (now, x)]
                 self.clear = []
                 self._keep_clear(self.support)

@@ -129,6 +129,19 @@ class KalmanConfig:
     # identical, glare steady error mean / max 0.087 / 0.296 → 0.238 / 1.204 mm (the turn's
     # end position: the last reports before the coast to the T changed)
     junction_cut_margin_mm: float = -1.0
+    # sightings that agree (within `junction_tol_mm`, last `junction_window` frames) needed
+    # to confirm a new junction (`JunctionTrack`, "confirm"; at least 2). Dev seed 7305,
+    # flank, glare, frames 7–12: glare gave one sighting a frame, scattered (199.4, 161.4,
+    # 209.7, 211.0, 105.7, 113.1 mm), two of which (209.7 / 211.0, the bar's near toe while
+    # its centre, 220 mm, lay beyond the view's end) agreed and made the dev runs' one false T
+    # frame, 10 mm short. 48 dev runs (experiments/tracking_diagnostics.py, one process per
+    # block, kalman variant; confirmed with experiments.tracking_sequences before / after)
+    # 2 → 3: that false T gone, no run gains a miss (goals missed 7 → 6; runs missing one
+    # stay 3: 7305 flank glare keeps its offset max, 1.46 mm on frame 0), every offset and
+    # heading score identical; the first report comes a frame
+    # later, T recall 100 → 96.9 % in 1201 and 1202 flank sunny, 96.6 → 93.1 % in 7301
+    # beside clean, 96.9 → 93.8 % in 1203 flank sunny and shadow (minimum 93.1 %)
+    junction_confirm_min: int = 3
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
     # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
     # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to

@@ -395,6 +395,7 @@ class Tracker:
             crossing_zone=tuple(self.x_ref + z for z in c.junction_crossing_zone_mm),
             keep_clear=c.junction_keep_clear,
             fuse=c.junction_fuse,
+            confirm_min=c.junction_confirm_min,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0

@@ -204,3 +204,29 @@ def test_junction_fuse_mean_averages_the_agreeing_sightings():
     assert out[3] == pytest.approx(212.0 - 4.5 + 0.5, abs=1e-9)
     with pytest.raises(ValueError, match="fuse"):
         JunctionTrack(10, 6.0, hold=6, fuse="last")
+
+
+def test_tracker_needs_three_agreeing_sightings_to_confirm_a_junction():
+    """Dev seed 7305, flank, glare (frames 7–12): scattered glare sightings, two of which
+    agree by chance near the end of the view (209.7 / 211.0 mm) and were a false T 10 mm
+    short; the tracker's default needs a third agreeing sighting, as the bar gives."""
+    from cslx.runtime.line_filter import KalmanConfig
+
+    n = KalmanConfig().junction_confirm_min
+    assert n == 3
+
+    def track():
+        return JunctionTrack(10, 6.0, hold=6, hold_min_support=3, confirm_min=n)
+
+    # frame-by-frame sightings moved as in the dev run (1.4 mm a frame): 199.4, 161.4, 209.7,
+    # 211.0, 105.7, 113.1
+    junk = [199.4, 161.4, 209.7, 211.0, 105.7, 113.1]
+    out = _run(track(), junk, step=1.4)
+    assert all(math.isnan(v) for v in out)
+    # the same with the old two-sighting rule: frame 3 reports the chance pair
+    old = _run(JunctionTrack(10, 6.0, hold=6, hold_min_support=3), junk, step=1.4)
+    assert math.isfinite(old[3])
+    # a crossing weld seen on three frames is confirmed on the third
+    bar = lambda k: 212.0 - 1.5 * k  # noqa: E731
+    out = _run(track(), [bar, bar, bar, None])
+    assert math.isnan(out[1]) and out[2] == pytest.approx(bar(2))

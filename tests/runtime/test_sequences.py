@@ -40,7 +40,7 @@ def test_rendered_approach_to_a_t(tracker, nuisance, placement):
     assert r["estimate_pct"] == 100.0
     assert r["offset_max_mm"] <= 1.0, r
     assert r["t_false"] == 0, r
-    # a junction is confirmed from the second sighting on
+    # a junction is confirmed from the third sighting on (KalmanConfig.junction_confirm_min)
     found = [
         o.junction and abs(o.junction_x_mm - t) <= 3.0
         for o, t in zip(obs, seq["junction_x_mm"], strict=True)
