@@ -45,26 +45,25 @@ def test_stripe_x_is_the_triangulated_principal_point(tracker):
 
 
 def test_offset_and_junction_on_rendered_frames(tracker, frames):
+    need = tracker.kalman.junction_confirm_min
+    assert need >= 2
     for kind, img, gt in frames:
         tracker.reset()
-        first = tracker.step(img)
         # a still robot sees the same frame again (odometry 0): the junction is confirmed
-        second = tracker.step(img, odometry=0.0)
-        for obs in (first, second):
-            assert obs.status == "ok"
-            assert abs(obs.offset_mm - gt["offset_mm"]) < 1.0, (
-                kind,
-                obs.offset_mm,
-                gt["offset_mm"],
-            )
-            assert abs(obs.bead_width_mm - gt["bead_width_mm"]) < 3.0
-            assert 0.0 < obs.confidence <= 1.0
-        assert not first.junction  # one sighting is not enough
+        # on the `junction_confirm_min`-th agreeing sighting, not before
+        obs = [tracker.step(img)] + [tracker.step(img, odometry=0.0) for _ in range(need - 1)]
+        for o in obs:
+            assert o.status == "ok"
+            assert abs(o.offset_mm - gt["offset_mm"]) < 1.0, (kind, o.offset_mm, gt["offset_mm"])
+            assert abs(o.bead_width_mm - gt["bead_width_mm"]) < 3.0
+            assert 0.0 < o.confidence <= 1.0
+        assert not any(o.junction for o in obs[:-1])  # fewer sightings are not enough
+        last = obs[-1]
         if kind == "cross":
-            assert second.junction
-            assert abs(second.junction_x_mm - gt["junction_x_mm"]) < 3.0
+            assert last.junction
+            assert abs(last.junction_x_mm - gt["junction_x_mm"]) < 3.0
         else:
-            assert not second.junction and math.isnan(second.junction_x_mm)
+            assert not last.junction and math.isnan(last.junction_x_mm)
 
 
 def test_bad_frames_give_zero_confidence(tracker, frames):
