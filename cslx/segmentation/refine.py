@@ -469,27 +469,16 @@ def second_pass(
     new, _ = refine_centres(mono, pos, use, sigma=sigma, sigma_along=sa, axis=axis, precision=prec)
     if PROFILE_FIT:
         new = _fitted(mono, pos, use, new, clipped, fitted, sigma=sigma, axis=axis, sigma_along=sa)
-    scatter = _path_scatter(jnp.nan_to_num(new), use, 2 * PATH_HALF_WINDOW)
-    smoothed, _ = smooth_path(
-        jnp.nan_to_num(new),
-        valid,
-        scatter,
-        support=use,
-        correlation=REFINE_CORRELATION,
-        halves=REFINE_HALVES,
-        sided=True,
-    )
+    new = jnp.nan_to_num(new)
+    scatter = _path_scatter(new, use, 2 * PATH_HALF_WINDOW)
+
+    def smooth(weights=None):
+        kw = dict(correlation=REFINE_CORRELATION, halves=REFINE_HALVES, sided=True)
+        return smooth_path(new, valid, scatter, support=use, weights=weights, **kw)[0]
+
+    smoothed = smooth()
     if LOCAL_WEIGHTS:
-        smoothed, _ = smooth_path(
-            jnp.nan_to_num(new),
-            valid,
-            scatter,
-            support=use,
-            correlation=REFINE_CORRELATION,
-            halves=REFINE_HALVES,
-            sided=True,
-            weights=_local_weights(jnp.nan_to_num(new), smoothed, use),
-        )
+        smoothed = smooth(_local_weights(new, smoothed, use))
     return jnp.where(use, smoothed, pos)
 
 
