@@ -88,6 +88,14 @@ def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array
     slower, digit searches resolving 2 or 4 bits a pass (3 or 15 counts at once) 1.5–2.3×
     slower; and against the bracketed bisection (load 6): its bracket split into 4 or 8 in
     a pass (3 or 7 counts, 7.7 or 5.3 passes on random data) 1.6–1.7× slower.
+    Tried again for the kernel count (issue 13; XLA's CPU backend runs a pass as 7 kernels:
+    the midpoint, the comparison, the count split in two reductions, the bracket update,
+    a copy and the loop test): counting over the keys as (20, 32) blocks, and 3 thresholds a
+    pass on those blocks (13 chained medians of 640 points: 1355 → 1043 and → 732 kernels)
+    took the chain 129 → 121 µs and 121 → 128 µs (400 interleaved calls), the weld features
+    1.126 → 1.135 ms and 2.09 → 2.45 ms (600 interleaved calls, load 8–9); a sort of the
+    keys 1.089 → 1.204 ms. What a median costs is its passes over the points, not the
+    kernels' dispatch.
     """
     x = lax.stop_gradient(x)
     if x.dtype != jnp.float32:  # the keys are 32-bit: other dtypes take the sort

@@ -219,6 +219,10 @@ def plate_fit(
         valid: (N,) which points exist.
     Returns:
         (c0, c1) and the robust residual scale σ (mm, ≥ sigma_floor_mm).
+
+    The loops of this module stay rolled: unrolled (`fori_loop(..., unroll=True)` here, in
+    the circle, its robust refit and the cap fit) the weld features went 2.06 → 3.09 ms
+    (600 interleaved calls on 12 tracking frames, load 7; issue 13).
     """
     w0 = valid.astype(s.dtype)
     floor = jnp.asarray(config.sigma_floor_mm, s.dtype)
