@@ -287,8 +287,9 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   and 5 measured −1.1 mm, the left flank and toe under the edge weighted 0 and the cap
   placed by the right flank (12–14 mm wide for 16.3) at full confidence; frames 11–20
   +0.2 to +0.6 mm, steps of 0.35–0.45 (under the 0.5 cut) below the right flank; the
-  drift of that bias made the heading 4° off on frames 10–14. Fixed by the edge weight's
-  ramp from 0.25 and the side-cover factor (`tracking_config`: 2 runs / 2 misses). 7302
+  drift of that bias made the heading 4° off on frames 10–14. The side-cover factor
+  fixes its offset (`tracking_config`: 3 runs / 3 misses; heading 0.536° left; with the
+  edge weight's ramp, not kept for Figure 22's sake, 2 runs / 2 misses). 7302
   flank shadow (heading 0.633°): the vertical stripe crosses the horizontal one on the
   bead's toe (4–7 mm from its centre, frames 0–22, then across the crown): centres there
   2–7 px off and the bead ±0.5–0.9 mm frame to frame. Weighting 0 the horizontal
