@@ -292,7 +292,8 @@ def tracking_config():
     shares of kept points (so that the clip weights 0.1 count): 5 runs (1201 beside sunny
     heading 0.548°). Figure 22's closed loop, dev seed 2201, glare (steady error mean / max,
     estimation error mean / max mm): 0.125 / 0.630, 0.073 / 0.254 → 0.115 / 0.275, 0.107 /
-    0.297; shadow and sunny: see the branch report.
+    0.297; shadow 0.087 / 0.220, 0.092 / 0.261 → 0.081 / 0.220, 0.086 / 0.261; sunny
+    identical.
 
     Not kept: the edge weight falling linearly from 1 at a step of 0.25 to 0 at 0.5
     (`PipelineConfig.edge_weight_ramp` 0.25; a step below 0.5 still biases the centre: 7305
