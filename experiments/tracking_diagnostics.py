@@ -283,6 +283,25 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   the stripe, and the tracker weights such centres 0 in the cap fit
   (`cslx.runtime.tracker.tracking_config`, the 48-run evidence there).
 
+- track12e (48 dev runs; default 3 runs / 5 goal misses). 7305 beside shadow: frames 1
+  and 5 measured −1.1 mm, the left flank and toe under the edge weighted 0 and the cap
+  placed by the right flank (12–14 mm wide for 16.3) at full confidence; frames 11–20
+  +0.2 to +0.6 mm, steps of 0.35–0.45 (under the 0.5 cut) below the right flank; the
+  drift of that bias made the heading 4° off on frames 10–14. The side-cover factor
+  fixes its offset (`tracking_config`: 3 runs / 3 misses; heading 0.536° left; with the
+  edge weight's ramp, not kept for Figure 22's sake, 2 runs / 2 misses). 7302
+  flank shadow (heading 0.633°): the vertical stripe crosses the horizontal one on the
+  bead's toe (4–7 mm from its centre, frames 0–22, then across the crown): centres there
+  2–7 px off and the bead ±0.5–0.9 mm frame to frame. Weighting 0 the horizontal
+  stripe's points within 2 mm (y_r) of the vertical stripe's (`weld_features`, not kept)
+  fixed it (0.385°) but cost 5 runs / 9 misses (1201 flank glare, 7302 / 7305 flank sunny,
+  7305 flank glare heading 0.52–0.66°: the toe or flank is half the bead's evidence on the
+  flank); with the side factor 4 runs / 5 misses; 3 mm worse. 7305 flank glare offset
+  max: frame 0's measurement (−1.43 mm; the same on a second pass of that frame with the
+  bands set, so not the first pass): glints at the left flank next to the crossing (white
+  clipped centres weighted 0.1, one unclipped 0.9 mm low), the right flank 0.2–0.3 mm high;
+  no fix found (the filter must report frame 0: 47 of 48 frames is under 98 %).
+
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
 """

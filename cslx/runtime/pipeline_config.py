@@ -152,7 +152,10 @@ class PipelineConfig(eqx.Module):
         stripe by more than ``edge_weight_ratio`` × the laser channel at the centre, sampled
         ``edge_weight_gap`` px to either side (`cslx.segmentation.clipped.background_step`:
         a shadow edge or glint along the stripe); 1 = off (the paper's pipeline). Evidence
-        in `tracking_config` (0, 0.5, 6 px there).
+        in `tracking_config` (0, 0.5, 6 px there). edge_weight_ramp: > 0 (and below the
+        ratio), the weight falls linearly from 1 at a step of ``edge_weight_ramp`` to
+        ``edge_weight`` at ``edge_weight_ratio`` instead of jumping there (off; tried
+        at 0.25 in `tracking_config` and not kept, the evidence there).
     band_first: with the ROI allowed, cut the bands out of the uint8 RGB frame first and
         convert only them (`cslx.runtime.band_input.band_image`: colour sum, clipped mask,
         `fill_clipped`; equal to the bands of the converted frame). False converts the
@@ -206,6 +209,7 @@ class PipelineConfig(eqx.Module):
     edge_weight: float = eqx.field(static=True, default=1.0)
     edge_weight_ratio: float = eqx.field(static=True, default=0.5)
     edge_weight_gap: int = eqx.field(static=True, default=6)
+    edge_weight_ramp: float = eqx.field(static=True, default=0.0)
     band_first: bool = eqx.field(static=True, default=True)
     first_pass_stride: int = eqx.field(static=True, default=4)
     stats_stride: int = eqx.field(static=True, default=4)
@@ -271,6 +275,36 @@ def tracking_config():
     0.081 / 0.214 → 0.125 / 0.630 mm (the turn's end 0.76 mm past the T against 0.16 mm
     short, junction frames 51 → 35), estimation error mean / max 0.066 / 0.195 → 0.073 /
     0.254 mm: within the goals, but no better there.
+
+    A bead one of whose flanks and toes the pipeline weighted out (weight 0) is less
+    confident (`WeldConfig.side_cover_power` 2: (min / max of the two sides' shares of kept
+    points)²; issue 12, track12e): placed by the other flank alone it was 1.1 mm off (7305
+    beside shadow frames 1 and 5, the left flank under the edge, bead 12–14 mm wide for
+    16.3) and the filter and the heading window took it at full weight. 48 dev T
+    approaches (seeds 7301, 7302, 7305, 1201–1203; experiments/tracking_diagnostics.py,
+    one process per seed block, variant against the default): goal misses 5 → 3, runs
+    missing one 3 → 3 (7305 beside shadow offset mean / max / heading 0.234 / 1.02 / 1.09
+    → 0.192 / 0.686 / 0.536: the heading still missed; none newly missed); only glare and
+    shadow runs change (16), per kind offset mean / max averaged over the runs mm, heading
+    mean °: glare 0.1008 / 0.451 / 0.283 → 0.1001 / 0.447 / 0.273, shadow 0.0942 / 0.475 /
+    0.306 → 0.0912 / 0.445 / 0.260; T recall and false T identical. ⁴: the same misses
+    (7305 beside shadow heading 0.510°). The sides' mean prior weights instead of their
+    shares of kept points (so that the clip weights 0.1 count): 5 runs (1201 beside sunny
+    heading 0.548°). Figure 22's closed loop, dev seed 2201, glare (steady error mean / max,
+    estimation error mean / max mm): 0.125 / 0.630, 0.073 / 0.254 → 0.115 / 0.275, 0.107 /
+    0.297; shadow 0.087 / 0.220, 0.092 / 0.261 → 0.081 / 0.220, 0.086 / 0.261; sunny
+    identical.
+
+    Not kept: the edge weight falling linearly from 1 at a step of 0.25 to 0 at 0.5
+    (`PipelineConfig.edge_weight_ramp` 0.25; a step below 0.5 still biases the centre: 7305
+    beside shadow frames 13 and 20, steps 0.35–0.45 under the flank facing the sunlit side,
+    heights 0.2–0.4 mm low). With the side factor ² it took the 48 runs to 2 runs / 2
+    misses (7305 beside shadow 0.173 / 0.563 / 0.375; glare 0.0961 / 0.450 / 0.275, shadow
+    0.0896 / 0.435 / 0.245; 7305 flank glare heading 0.440 → 0.482°; a ramp from 0.35: 3
+    runs, 1201 flank glare 0.517°), but Figure 22 (2201, glare) went astray after the turn
+    with it, alone or with the side factor: estimation error mean / max 0.256 / 1.327 and
+    0.266 / 1.242 mm (the estimate swung from +1.2 to −1.2 mm on the bar's first 12
+    frames), junction frames 34 → 50 / 53.
     """
     return PipelineConfig(
         use_med=False,
@@ -283,4 +317,5 @@ def tracking_config():
         edge_weight=0.0,
         edge_weight_ratio=0.5,
         edge_weight_gap=6,
+        weld=WeldConfig(junction_min_confidence=0.1, side_cover_power=2.0),
     )

@@ -95,6 +95,11 @@ class WeldConfig:
         that the apex reaches the plate past the far toe. Dev flank seeds 1201–1203 (12 runs),
         T recall 91.0 % with 0: 8 mm 99.7, 12 mm 99.5, 16 mm 99.5 % (0 false reports), 20 mm
         97.9 % with 3 false (a longer window reaches lower points beyond flank bumps).
+    side_cover_power: p > 0: the confidence × (min(L, R) / max(L, R))^p, L and R the share
+        of the valid points with a prior weight > 0 on each side of the bead's centre, out
+        to its half-chord + `cap_margin_mm` (`_side_cover`): a bead one of whose flanks the
+        pipeline weighted out is placed by the other alone. 0 (off) here; 2 in the tracker's
+        pipeline (`cslx.runtime.pipeline_config.tracking_config`, the evidence there).
     """
 
     threshold_mm: float = 0.3
@@ -114,6 +119,7 @@ class WeldConfig:
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
     n_cap: int = static(8)
+    side_cover_power: float = static(0.0)
 
 
 class WeldFeature(NamedTuple):
@@ -314,6 +320,25 @@ def _cap_fit(t, h, w, p0, sigma, n_iter):
     return p, wr
 
 
+def _side_cover(t, valid, weights, t_c, p_cap, half0, config: WeldConfig):
+    """(min(L, R) / max(L, R))^p, p = `side_cover_power` (1 where p = 0 or no weights): L, R
+    the share of the valid points with a prior weight > 0 on each side of the bead's centre
+    t_c, out to its half-chord plus `cap_margin_mm`. A bead one of whose flanks and toes the
+    pipeline weighted out (weight 0: a shadow edge along the stripe; a clipped core's 0.1
+    counts as kept) is placed by the other flank alone, and its confidence says so."""
+    if weights is None or config.side_cover_power == 0:
+        return 1.0
+    w = (jnp.asarray(weights, t.dtype) > 0).astype(t.dtype)
+    half = jnp.where(jnp.isfinite(p_cap[1]), jnp.abs(p_cap[1]), half0) + config.cap_margin_mm
+    d = t - t_c
+    sides = []
+    for side in (d < 0, d >= 0):
+        m = (valid & side & (jnp.abs(d) < half)).astype(t.dtype)
+        sides.append(jnp.sum(m * w) / jnp.maximum(jnp.sum(m), 1.0))
+    lo, hi = jnp.minimum(*sides), jnp.maximum(*sides)
+    return jnp.where(hi > 0, lo / jnp.maximum(hi, 1e-6), 0.0) ** config.side_cover_power
+
+
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
@@ -458,7 +483,8 @@ def stripe_feature(
     f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
     f_cover = jnp.clip(n_in / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_in / 15.0, 0, 1)
     f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
-    confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid, 0.0)
+    f_side = _side_cover(t, valid, weights, t_cap, p_cap, half0, config)
+    confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid * f_side, 0.0)
     return _feature(found, centre, pos, width, height, confidence, sigma, dtype)
 
 

@@ -328,3 +328,29 @@ def test_weights_keep_the_cap_on_the_measured_flanks():
     # weights of 1 are the unweighted fit
     ones = stripe_feature(P, V, 1, WeldConfig(), jnp.ones(len(pts)))
     assert float(ones.position) == pytest.approx(float(plain.position), abs=1e-5)
+
+
+def test_side_cover_lowers_the_confidence_of_a_one_sided_bead():
+    """`WeldConfig.side_cover_power` (issue 12): a bead whose one flank and toe the pipeline
+    weighted out (weight 0: a shadow edge along the stripe) is placed by the other flank
+    alone and is less confident; weights on both flanks alike leave most of it, and
+    down-weighted points (weight > 0, a clipped core) all of it."""
+    rng = np.random.default_rng(5)
+    pts, valid, _ = horizontal_profile(rng, 0.0, 16.0, 2.0, glint=False)
+    P, V = jnp.asarray(pts), jnp.asarray(valid)
+    y = pts[:, 1]
+    on = WeldConfig(side_cover_power=2.0)
+    one_side = jnp.asarray(np.where((y > 2.0) & (y < 12.0), 0.0, 1.0))
+    both = jnp.asarray(np.where((np.abs(y) > 2.0) & (np.abs(y) < 12.0), 0.0, 1.0))
+    clipped = jnp.asarray(np.where((y > 2.0) & (y < 12.0), 0.1, 1.0))
+
+    def conf(config, w):
+        f = stripe_feature(P, V, 1, config, w)
+        assert bool(f.found)
+        return float(f.confidence)
+
+    assert conf(on, one_side) < 0.5 * conf(WeldConfig(), one_side)
+    assert conf(on, both) > 0.7 * conf(WeldConfig(), both)  # the sides' shares differ a little
+    assert conf(on, clipped) == pytest.approx(conf(WeldConfig(), clipped), rel=1e-6)
+    # off (0) by default: the weighted fit's confidence is unchanged
+    assert conf(WeldConfig(side_cover_power=0.0), one_side) == conf(WeldConfig(), one_side)
