@@ -135,6 +135,9 @@ SIGMA_REFINE = 6.0
 #: too) and its correlation c: see `second_pass`.
 REFINE_HALVES = (2, 4, 8, 16, 32, 64, 96, 128, 192, 256)
 REFINE_CORRELATION = 6.0
+#: Local lines (curvature from ±`path.CURVATURE_HALF` centres) join the final smoothing's
+#: quadratics (`path.smooth_path(lines=True)`; evidence in `cslx.segmentation.path`).
+LINES = True
 #: Second smoothing weighted by each centre's local precision (`second_pass`, `_local_weights`):
 #: on/off, the along-path Gaussian σ (centres) of the local residual variance, the power of the
 #: relative precision and the weights' bounds.
@@ -473,7 +476,7 @@ def second_pass(
     scatter = _path_scatter(new, use, 2 * PATH_HALF_WINDOW)
 
     def smooth(weights=None):
-        kw = dict(correlation=REFINE_CORRELATION, halves=REFINE_HALVES, sided=True)
+        kw = dict(correlation=REFINE_CORRELATION, halves=REFINE_HALVES, sided=True, lines=LINES)
         return smooth_path(new, valid, scatter, support=use, weights=weights, **kw)[0]
 
     smoothed = smooth()
