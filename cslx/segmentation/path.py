@@ -70,7 +70,15 @@ vertical stripe's bend). By frames (±512): 0–1 0.0297 / 0.1336, 0.0312 / 0.13
 0.1255, 0.0284 / 0.1321; 2: 0.0283 / 0.1346, 0.0346 / 0.1495 → 0.0262 / 0.1360, 0.0340 /
 0.1424; vertical centres within 12 rows of the border p95 0.254 → 0.208 mm. The toes are not
 helped (sharpest bends 0.17 → 0.18 px towards the chord). Flat wall (seeds 41–46): RMS
-smaller in 24 of 24 frame-stripes (worst 0.064 → 0.056 px), none beyond 0.5 px.
+smaller in 24 of 24 frame-stripes (worst 0.064 → 0.056 px), none beyond 0.5 px. With the
+lines, the second pass's correlation c (`refine.REFINE_CORRELATION`) 6 → 8 / 10 (all 54
+frames): 0.0269 / 0.1285, 0.0290 / 0.1342 and 0.0271 / 0.1290, 0.0283 / 0.1339; c 8 (used),
+frames 0–1 / 2: vertical median 0.0284 → 0.0277, 0.0340 → 0.0326, p95 0.1321 → 0.1317,
+0.1424 → 0.1385, horizontal within 0.0003 mm; flat wall RMS smaller in 24 of 24 again,
+worst 0.050 px. Also tried: the lines in the first pass's
+smoothing as well (`robust._finish`, c 6): 0.0268 / 0.1287, 0.0302 / 0.1358, no gain.
+Cost: one smoothing 2.8 → 5.0 ms (640 centres), 2.1 → 3.7 ms (480), two per stripe
+(`refine.LOCAL_WEIGHTS`; jitted, median of 15 interleaved, load ≈ 8 on 2 cores).
 
 Pure JAX (the moments of all windows in one matrix product, closed-form 3×3 inverse),
 jit- and vmap-able; ≈ 1 ms per path on the development CPU.
