@@ -41,6 +41,45 @@ if independent). A centre next to a corner, whose symmetric window must stay sho
 averages the plate on its own side; see `cslx.segmentation.refine.second_pass` for the
 development figures.
 
+Local lines (`smooth_path(lines=True)`, the linked detector's final smoothing,
+`refine.LINES`; issue 11). At a window's centre a line's variance factor is 1 / n against the
+quadratic's ≈ 9 / 4n, and at its end 4 / n against 9 / n, so lines average the plates and the
+path's ends with a third to a half the variance. On a curve they are biased, and the vertical
+stripe is curved along its whole length: it runs ≈ 155 px off the image centre and the lens
+distortion bends it (second difference 0.065 px at lag 24, development frames; the
+horizontal stripe, near the centre row, ≤ 0.005). So the lines are fitted to the centres
+less k m², k = κ/2 of the quadratic through ±`CURVATURE_HALF` centres (`_curvature`): the
+path's slowly varying bend comes from the long window, the value and slope from the ICI's
+window. For every side the ICI rule chooses the lines' window as the quadratics', and their
+estimates join the inverse-variance mean. Where the tail was (development seeds 7100–7117,
+frames 0–2, 54 frames; errors > 0.1 mm, `experiments.robust_extraction`'s centres, H / V): 31
+/ 15 % on the bends of the true path (second difference at lag 5 > 0.1 px; 5 / 3 % of the
+centres; the first pass's rounding of the toes leaks through `refine.refine_centres`: 0.17 px
+towards the chord at the sharpest bends, none when re-measured around the true path), 45 /
+43 % within 1–80 centres of a bend (the bead's caps and the plates next to it), the rest
+farther or in frames without a bend; 4 / 13 % within 12 centres of the image border (the
+vertical stripe's top end, mostly cross scenes where it runs over the second weld). Mostly
+slowly varying error (a 21-centre running mean keeps 70–90 % of its RMS), not a bias. Development
+frames (same 54, H / V median / p95 mm, detection and gross unchanged: 100 / 99.90 %, 0.014 /
+0.042 %): quadratics only 0.0292 / 0.1338, 0.0321 / 0.1434; with lines, k from ±64 / 256 /
+512 (used) / 1024: 0.0308 / 0.1393, 0.0364 / 0.1498; 0.0278 / 0.1327, 0.0317 / 0.1346; 0.0269
+/ 0.1294, 0.0303 / 0.1353; 0.0265 / 0.1287, 0.0303 / 0.1353 (the curvature of a short window
+is too noisy: its error grows with the line's h²); plain lines (k = 0) on all three sides:
+0.0233 / 0.1264, 0.0389 / 0.1472, one-sided only: 0.0276 / 0.1290, 0.0379 / 0.1575 (the
+vertical stripe's bend). By frames (±512): 0–1 0.0297 / 0.1336, 0.0312 / 0.1398 → 0.0272 /
+0.1255, 0.0284 / 0.1321; 2: 0.0283 / 0.1346, 0.0346 / 0.1495 → 0.0262 / 0.1360, 0.0340 /
+0.1424; vertical centres within 12 rows of the border p95 0.254 → 0.208 mm. The toes are not
+helped (sharpest bends 0.17 → 0.18 px towards the chord). Flat wall (seeds 41–46): RMS
+smaller in 24 of 24 frame-stripes (worst 0.064 → 0.056 px), none beyond 0.5 px. With the
+lines, the second pass's correlation c (`refine.REFINE_CORRELATION`) 6 → 8 / 10 (all 54
+frames): 0.0269 / 0.1285, 0.0290 / 0.1342 and 0.0271 / 0.1290, 0.0283 / 0.1339; c 8 (used),
+frames 0–1 / 2: vertical median 0.0284 → 0.0277, 0.0340 → 0.0326, p95 0.1321 → 0.1317,
+0.1424 → 0.1385, horizontal within 0.0003 mm; flat wall RMS smaller in 24 of 24 again,
+worst 0.050 px. Also tried: the lines in the first pass's
+smoothing as well (`robust._finish`, c 6): 0.0268 / 0.1287, 0.0302 / 0.1358, no gain.
+Cost: one smoothing 2.8 → 5.0 ms (640 centres), 2.1 → 3.7 ms (480), two per stripe
+(`refine.LOCAL_WEIGHTS`; jitted, median of 15 interleaved, load ≈ 8 on 2 cores).
+
 Pure JAX (the moments of all windows in one matrix product, closed-form 3×3 inverse),
 jit- and vmap-able; ≈ 1 ms per path on the development CPU.
 """
@@ -59,6 +98,25 @@ HALVES = (2, 4, 8, 16, 32, 64, 96)
 GAMMA = 2.0
 #: Neighbouring centres that share one noise value (variance inflation of a window mean).
 CORRELATION = 4.0
+#: Half window (centres) of the quadratic whose curvature the local lines take
+#: (`smooth_path(lines=True)`, module docstring "Local lines").
+CURVATURE_HALF = 512
+
+
+def _curvature(pos, valid, support, half: int, weights=None):
+    """k = κ/2 (px per centre²), κ the second derivative of the least-squares quadratic
+    through the `support` centres within ±`half` (weighted by `weights`; the last row of the
+    closed-form 3×3 inverse), 0 where it is not determined."""
+    w = support.astype(pos.dtype)
+    if weights is not None:
+        w = w * weights.astype(pos.dtype)
+    y = jnp.where(valid, pos, 0.0)
+    (s0, s1, s2, s3, s4), (t0, t1, t2) = (a[0] for a in _moments(w, y, (half,), 0))
+    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
+    det = s0 * c00 + s1 * c01 + s2 * c02
+    ok = valid & (s0 >= 5) & (det > 1e-6 * s0**3)
+    a2 = (c02 * t0 + (s1 * s2 - s0 * s3) * t1 + (s0 * s2 - s1 * s1) * t2) / jnp.where(ok, det, 1.0)
+    return jnp.where(ok, a2 / half**2, 0.0)
 
 
 def _kernels(halves, side: int = 0) -> np.ndarray:
@@ -110,17 +168,30 @@ def _counts(support, halves, side: int = 0):
     return jnp.stack(rows)
 
 
-def _window_fits(pos, valid, support, halves, side: int = 0, weights=None):
+def _window_fits(
+    pos, valid, support, halves, side: int = 0, weights=None, order: int = 2, curv=None
+):
     """Value at each valid centre of the local quadratic through the `support` centres within
     ±h (every h of `halves`), weighted by `weights` (None: uniform), and its variance
     factor (M⁻¹)₀₀ for a centre of weight 1: (estimate, factor), each (H, N), NaN / inf where
-    the window holds fewer than 5 support centres."""
+    the window holds fewer than 5 support centres. `order` 1: the local line instead (3
+    centres), through y − k m² where `curv` (N,) gives k per centre (None: 0)."""
     w = support.astype(pos.dtype)
     if weights is not None:
         w = w * weights.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
     moments = _moments(w, y, halves, side)
     (s0, s1, s2, s3, s4), (t0, t1, t2) = (jnp.moveaxis(a, 1, 0) for a in moments)
+    if order == 1:  # local lines: (M⁻¹)₀₀ = s2 / (s0 s2 − s1²)
+        count = s0 if weights is None else _counts(support, halves, side)
+        det = s0 * s2 - s1 * s1
+        ok = valid & (count >= 3) & (det > 1e-6 * s0 * jnp.maximum(s2, 1e-12))
+        safe = jnp.where(ok, det, 1.0)
+        if curv is not None:  # through y − k m²: in the window's u = m/h, k h² u²
+            a = curv[None, :] * jnp.asarray(np.square(halves), pos.dtype)[:, None]
+            t0, t1 = t0 - a * s2, t1 - a * s3
+        est = y + (s2 * t0 - s1 * t1) / safe
+        return jnp.where(ok, est, jnp.nan), jnp.where(ok, s2 / safe, jnp.inf)
     c00 = s2 * s4 - s3 * s3
     c01 = s2 * s3 - s1 * s4
     c02 = s1 * s3 - s2 * s2
@@ -143,6 +214,8 @@ def smooth_path(
     halves=HALVES,
     sided: bool = False,
     weights=None,
+    lines: bool = False,
+    curvature_half: int = CURVATURE_HALF,
 ):
     """Local-quadratic path smoothing with per-centre windows by the ICI rule (module docstring).
 
@@ -162,6 +235,10 @@ def smooth_path(
         weights: (N,) per-centre weights of the fits (relative inverse variances, ≈ 1 for
             a typical centre; None: uniform); the factor is then that of a centre of
             weight 1 (`refine.LOCAL_WEIGHTS`).
+        lines: also fit local lines on every side's windows (through the centres less
+            k m², k = κ/2 of the quadratic through ±`curvature_half` centres; 0: none),
+            choose their windows by the ICI rule and add them to the inverse-variance mean
+            (static; module docstring, "Local lines").
 
     Returns:
         (smoothed pos, factor): factor (N,) ≤ 1 is the ratio of the chosen estimate's std to
@@ -176,6 +253,12 @@ def smooth_path(
         _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights)
         for side in sides
     ]
+    if lines:
+        k = _curvature(pos, valid, support, curvature_half, weights) if curvature_half else None
+        fits += [
+            _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights, 1, k)
+            for side in sides
+        ]
     for chosen, f, use in fits:
         w = jnp.where(use, 1.0 / jnp.maximum(f, 1e-3) ** 2, 0.0)
         num = num + w * jnp.where(use, chosen, 0.0)
@@ -185,10 +268,12 @@ def smooth_path(
     return jnp.where(use, out, pos), jnp.where(use, jnp.sqrt(1.0 / jnp.where(use, den, 1.0)), 1.0)
 
 
-def _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights=None):
+def _ici(
+    pos, valid, support, scatter, gamma, correlation, halves, side, weights=None, order=2, curv=None
+):
     """The ICI rule over the windows of one side (`smooth_path`): (estimate, its std factor,
     whether a window was usable), each (N,)."""
-    est, var = _window_fits(pos, valid, support, halves, side, weights)  # (H, N)
+    est, var = _window_fits(pos, valid, support, halves, side, weights, order, curv)  # (H, N)
     # One centre's own noise bounds a fit through it; an extrapolation (a centre outside the
     # support) can be worse than that.
     factor = jnp.sqrt(jnp.where(support, jnp.minimum(correlation * var, 1.0), correlation * var))

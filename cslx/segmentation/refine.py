@@ -132,9 +132,12 @@ def refine_centres(
 #: 0.173 / 0.198 and 0.171 / 0.198, medians 0.039 / 0.046 and 0.041 / 0.048 mm.
 SIGMA_REFINE = 6.0
 #: Half windows of the second pass's path smoothing (`path.smooth_path`, one-sided windows
-#: too) and its correlation c: see `second_pass`.
+#: too) and its correlation c: see `second_pass`; c 6 → 8 with `LINES` (`path`, "Local lines").
 REFINE_HALVES = (2, 4, 8, 16, 32, 64, 96, 128, 192, 256)
-REFINE_CORRELATION = 6.0
+REFINE_CORRELATION = 8.0
+#: Local lines (curvature from ±`path.CURVATURE_HALF` centres) join the final smoothing's
+#: quadratics (`path.smooth_path(lines=True)`; evidence in `cslx.segmentation.path`).
+LINES = True
 #: Second smoothing weighted by each centre's local precision (`second_pass`, `_local_weights`):
 #: on/off, the along-path Gaussian σ (centres) of the local residual variance, the power of the
 #: relative precision and the weights' bounds.
@@ -219,7 +222,7 @@ def second_pass(
     ±192: 0.036 / 0.167, 0.040 / 0.186; ±256: 0.036 / 0.168, 0.039 / 0.184; ±256, c 6:
     0.036 / 0.174, 0.038 / 0.184; one-sided as well, ±96: 0.039 / 0.165, 0.046 / 0.183;
     ±192, c 6: 0.035 / 0.154, 0.040 / 0.174; ±192, c 8: 0.035 / 0.155, 0.039 / 0.172;
-    ±256, c 6 (used): 0.035 / 0.153, 0.039 / 0.169 (corners median 0.137 → 0.094 px);
+    ±256, c 6 (used before `LINES`): 0.035 / 0.153, 0.039 / 0.169 (corners 0.137 → 0.094 px);
     the same with Γ 2.5: 0.035 / 0.154, 0.038 / 0.168; only the most precise of the three
     windows instead of their inverse-variance mean (±192, c 6): 0.035 / 0.169,
     0.039 / 0.185; one-sided windows in the first pass's smoothing as well: no change
@@ -473,7 +476,7 @@ def second_pass(
     scatter = _path_scatter(new, use, 2 * PATH_HALF_WINDOW)
 
     def smooth(weights=None):
-        kw = dict(correlation=REFINE_CORRELATION, halves=REFINE_HALVES, sided=True)
+        kw = dict(correlation=REFINE_CORRELATION, halves=REFINE_HALVES, sided=True, lines=LINES)
         return smooth_path(new, valid, scatter, support=use, weights=weights, **kw)[0]
 
     smoothed = smooth()
