@@ -112,7 +112,15 @@ def background_step(rgb, pos, valid, weights, gap: int):
 
 @functools.partial(
     jax.jit,
-    static_argnames=("axis", "max_run", "dome", "dome_min_run", "dome_white_share", "dome_along"),
+    static_argnames=(
+        "axis",
+        "max_run",
+        "dome",
+        "dome_min_run",
+        "dome_white_share",
+        "dome_along",
+        "margin",
+    ),
 )
 def fill_clipped(
     mono,
@@ -125,6 +133,7 @@ def fill_clipped(
     dome_min_run: int = DOME_MIN_RUN,
     dome_white_share: float = 0.0,
     dome_along: int = 0,
+    margin: int = 0,
 ):
     """Fill runs of clipped pixels along `axis` (≤ `max_run` long) from their flanks.
 
@@ -155,6 +164,11 @@ def fill_clipped(
     a trip (`lax.scan(..., unroll=8)`) cut the tracking frame's executed kernels 8 468 →
     7 338 but took it 8.45 → 11.60 ms (300 interleaved frames, `experiments.ab_tracking`,
     load 5–6).
+
+    ``margin`` (static; axis 0 only): return only samples ``margin .. n − margin`` along the
+    axis (e.g. a tracking band cut with context, `cslx.runtime.band_input`), the same values
+    as the full result's window: the scan down stops at the window's end and the scan up at
+    its start (n − margin steps instead of n), and the fill is evaluated on the window only.
     """
     c = jnp.asarray(clipped)
     n = mono.shape[axis]
@@ -172,7 +186,12 @@ def fill_clipped(
         after = lax.slice_in_dim(cp, 2 * dome_along, 2 * dome_along + n_o, axis=other)
         lone = ~(before | after)
         w = lone if w is None else (w | lone)
-    if axis == 0:
+    if margin:
+        if axis != 0:
+            raise ValueError("margin needs axis 0")
+        out = _flanks_rows(mono, c, w, margin)
+        mono, c = mono[margin : n - margin], c[margin : n - margin]
+    elif axis == 0:
         out = _flanks_rows(mono, c, w)
     else:
         out = tuple(x.T for x in _flanks_rows(mono.T, c.T, None if w is None else w.T))
@@ -184,7 +203,7 @@ def fill_clipped(
     if dome > 0:
         # a run longer than ``dome_min_run`` with at most ``dome_white_share`` of its pixels
         # ``white`` gets a parabola over the flat level, 1 + dome at its middle
-        i = lax.broadcasted_iota(jnp.int32, mono.shape, axis)
+        i = lax.broadcasted_iota(jnp.int32, mono.shape, axis) + margin
         u = (i - above).astype(mono.dtype) / jnp.maximum(below - above, 1).astype(mono.dtype)
         stripe = length > dome_min_run
         if w is not None:
@@ -193,7 +212,13 @@ def fill_clipped(
     return jnp.where(run, level, mono), run
 
 
-def _flanks_rows(m, c, white=None):
+def _window(index, value, margin):
+    """Rows margin .. n − margin of the scan's outputs (n − margin steps: down, up)."""
+    k = index.shape[0] - margin
+    return index[margin:, 0], value[margin:, 0], index[::-1, 1][:k], value[::-1, 1][:k]
+
+
+def _flanks_rows(m, c, white=None, margin=0):
     """Per pixel: the last unclipped row ≤ i and its value, the first ≥ i and its value
     (-1 / n and 0 where there is none), in one scan down and up the rows at once.
 
@@ -203,7 +228,7 @@ def _flanks_rows(m, c, white=None):
     """
     n, w = m.shape
     if white is not None:
-        return _flanks_rows_white(m, c, white)
+        return _flanks_rows_white(m, c, white, margin)
 
     def step(carry, xs):
         k, index, value = carry
@@ -214,12 +239,13 @@ def _flanks_rows(m, c, white=None):
 
     start = jnp.broadcast_to(jnp.asarray([-1, n], jnp.int32)[:, None], (2, w))
     init = (jnp.zeros((), jnp.int32), start, jnp.zeros((2, w), m.dtype))
-    xs = (jnp.stack([c, c[::-1]], 1), jnp.stack([m, m[::-1]], 1))
+    k = n - margin
+    xs = (jnp.stack([c[:k], c[::-1][:k]], 1), jnp.stack([m[:k], m[::-1][:k]], 1))
     _, (index, value) = lax.scan(step, init, xs)
-    return index[:, 0], value[:, 0], index[::-1, 1], value[::-1, 1]
+    return _window(index, value, margin)
 
 
-def _flanks_rows_white(m, c, white):
+def _flanks_rows_white(m, c, white, margin=0):
     """`_flanks_rows` plus, per pixel, how many ``white`` pixels its clipped run holds (one
     count carried down and one up the rows, reset by an unclipped pixel: their sum less the
     pixel's own)."""
@@ -237,7 +263,12 @@ def _flanks_rows_white(m, c, white):
     zero = jnp.zeros((2, w), jnp.int32)
     init = (jnp.zeros((), jnp.int32), start, jnp.zeros((2, w), m.dtype), zero)
     wh = white.astype(jnp.int32)
-    xs = (jnp.stack([c, c[::-1]], 1), jnp.stack([m, m[::-1]], 1), jnp.stack([wh, wh[::-1]], 1))
+    k = n - margin
+    xs = (
+        jnp.stack([c[:k], c[::-1][:k]], 1),
+        jnp.stack([m[:k], m[::-1][:k]], 1),
+        jnp.stack([wh[:k], wh[::-1][:k]], 1),
+    )
     _, (index, value, seen) = lax.scan(step, init, xs)
-    n_white = seen[:, 0] + seen[::-1, 1] - wh
-    return index[:, 0], value[:, 0], index[::-1, 1], value[::-1, 1], n_white
+    n_white = seen[margin:, 0] + seen[::-1, 1][: k - margin] - wh[margin:k]
+    return (*_window(index, value, margin), n_white)

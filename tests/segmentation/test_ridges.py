@@ -166,6 +166,11 @@ def test_fill_clipped_equals_run_by_run_reference_on_both_axes():
         assert 0 < ref_run.sum() < clipped.sum()  # some runs filled, some left
         np.testing.assert_array_equal(run, ref_run)
         np.testing.assert_array_equal(out, ref_out)
+    # a window away from the ends (the tracking bands' cut, issue 13): the full result's rows
+    for margin in (1, 25):
+        out, run = fill_clipped(mono, clipped, axis=0, max_run=24, margin=margin)
+        np.testing.assert_array_equal(np.asarray(run), ref_run[margin:-margin])
+        np.testing.assert_array_equal(np.asarray(out), ref_out[margin:-margin])
 
 
 def test_predicted_sigma_matches_scatter():
