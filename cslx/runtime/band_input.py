@@ -161,11 +161,15 @@ def band_image(
     def cut(x):
         return _sub_band(x, start - o0, size, 0)
 
+    def full():
+        return cut(_fill(sub, I, clip, weights, 0, dome))
+
+    def inner():  # the context fits on both sides: the scans stop at the band's far edge
+        return _fill(sub, I, clip, weights, 0, dome, ctx)
+
     def filled():
-        full = lambda: cut(_fill(sub, I, clip, weights, 0, dome))  # noqa: E731
         if outer < size + 2 * ctx:
             return full()
-        inner = lambda: _fill(sub, I, clip, weights, 0, dome, ctx)  # noqa: E731
         return lax.cond(start - o0 == ctx, inner, full)
 
     # Most frames have no clipped pixel in the band: skip the fill there (on the CPU

@@ -400,12 +400,12 @@ def _clip_weights(rgb, ch: Centres, config: PipelineConfig, dtype):
     if config.edge_weight != 1.0:
         # a shadow edge or glint across the stripe (`PipelineConfig.edge_weight`)
         step = background_step(rgb, ch.pos, ch.valid, config.weights, config.edge_weight_gap)
-        e = jnp.where(step > config.edge_weight_ratio, config.edge_weight, 1.0)
-        if 0 < config.edge_weight_ramp < config.edge_weight_ratio:  # linear from the ramp's start
-            u = (config.edge_weight_ratio - step) / (
-                config.edge_weight_ratio - config.edge_weight_ramp
-            )
-            e = config.edge_weight + (1.0 - config.edge_weight) * jnp.clip(u, 0.0, 1.0)
+        ratio, ramp = config.edge_weight_ratio, config.edge_weight_ramp
+        if 0 < ramp < ratio:  # linear from 1 at the ramp's start to edge_weight at the ratio
+            u = jnp.clip((ratio - step) / (ratio - ramp), 0.0, 1.0)
+            e = config.edge_weight + (1.0 - config.edge_weight) * u
+        else:
+            e = jnp.where(step > ratio, config.edge_weight, 1.0)
         e = e.astype(dtype)
         w = e if w is None else w * e
     return w

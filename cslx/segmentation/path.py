@@ -112,8 +112,7 @@ def _curvature(pos, valid, support, half: int, weights=None):
         w = w * weights.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
     (s0, s1, s2, s3, s4), (t0, t1, t2) = (a[0] for a in _moments(w, y, (half,), 0))
-    c00, c01, c02 = s2 * s4 - s3 * s3, s2 * s3 - s1 * s4, s1 * s3 - s2 * s2
-    det = s0 * c00 + s1 * c01 + s2 * c02
+    _, _, c02, det = _cofactors(s0, s1, s2, s3, s4)
     ok = valid & (s0 >= 5) & (det > 1e-6 * s0**3)
     a2 = (c02 * t0 + (s1 * s2 - s0 * s3) * t1 + (s0 * s2 - s1 * s1) * t2) / jnp.where(ok, det, 1.0)
     return jnp.where(ok, a2 / half**2, 0.0)
@@ -168,22 +167,35 @@ def _counts(support, halves, side: int = 0):
     return jnp.stack(rows)
 
 
-def _window_fits(
-    pos, valid, support, halves, side: int = 0, weights=None, order: int = 2, curv=None
-):
+def _cofactors(s0, s1, s2, s3, s4):
+    """The first row (c00, c01, c02) of the adjugate of the local quadratic's moment matrix
+    M = [s_{i+j}] and det M (M is symmetric: the first column too)."""
+    c00 = s2 * s4 - s3 * s3
+    c01 = s2 * s3 - s1 * s4
+    c02 = s1 * s3 - s2 * s2
+    return c00, c01, c02, s0 * c00 + s1 * c01 + s2 * c02
+
+
+def _window_fits(pos, valid, support, halves, side: int = 0, weights=None, lines=False, curv=None):
     """Value at each valid centre of the local quadratic through the `support` centres within
     ±h (every h of `halves`), weighted by `weights` (None: uniform), and its variance
-    factor (M⁻¹)₀₀ for a centre of weight 1: (estimate, factor), each (H, N), NaN / inf where
-    the window holds fewer than 5 support centres. `order` 1: the local line instead (3
-    centres), through y − k m² where `curv` (N,) gives k per centre (None: 0)."""
+    factor (M⁻¹)₀₀ for a centre of weight 1: [(estimate, factor)], each (H, N), NaN / inf
+    where the window holds fewer than 5 support centres. With `lines`, a second pair from
+    the same moments: the local line (3 centres) through y − k m², `curv` (N,) giving k per
+    centre (None: 0)."""
     w = support.astype(pos.dtype)
     if weights is not None:
         w = w * weights.astype(pos.dtype)
     y = jnp.where(valid, pos, 0.0)
     moments = _moments(w, y, halves, side)
     (s0, s1, s2, s3, s4), (t0, t1, t2) = (jnp.moveaxis(a, 1, 0) for a in moments)
-    if order == 1:  # local lines: (M⁻¹)₀₀ = s2 / (s0 s2 − s1²)
-        count = s0 if weights is None else _counts(support, halves, side)
+    count = s0 if weights is None else _counts(support, halves, side)
+    c00, c01, c02, det = _cofactors(s0, s1, s2, s3, s4)
+    ok = valid & (count >= 5) & (det > 1e-6 * s0**3)
+    safe = jnp.where(ok, det, 1.0)
+    est = y + (c00 * t0 + c01 * t1 + c02 * t2) / safe
+    fits = [(jnp.where(ok, est, jnp.nan), jnp.where(ok, c00 / safe, jnp.inf))]
+    if lines:  # (M⁻¹)₀₀ = s2 / (s0 s2 − s1²)
         det = s0 * s2 - s1 * s1
         ok = valid & (count >= 3) & (det > 1e-6 * s0 * jnp.maximum(s2, 1e-12))
         safe = jnp.where(ok, det, 1.0)
@@ -191,16 +203,8 @@ def _window_fits(
             a = curv[None, :] * jnp.asarray(np.square(halves), pos.dtype)[:, None]
             t0, t1 = t0 - a * s2, t1 - a * s3
         est = y + (s2 * t0 - s1 * t1) / safe
-        return jnp.where(ok, est, jnp.nan), jnp.where(ok, s2 / safe, jnp.inf)
-    c00 = s2 * s4 - s3 * s3
-    c01 = s2 * s3 - s1 * s4
-    c02 = s1 * s3 - s2 * s2
-    det = s0 * c00 + s1 * c01 + s2 * c02
-    count = s0 if weights is None else _counts(support, halves, side)
-    ok = valid & (count >= 5) & (det > 1e-6 * s0**3)
-    safe = jnp.where(ok, det, 1.0)
-    est = y + (c00 * t0 + c01 * t1 + c02 * t2) / safe
-    return jnp.where(ok, est, jnp.nan), jnp.where(ok, c00 / safe, jnp.inf)
+        fits.append((jnp.where(ok, est, jnp.nan), jnp.where(ok, s2 / safe, jnp.inf)))
+    return fits
 
 
 def smooth_path(
@@ -249,16 +253,16 @@ def smooth_path(
     support = valid if support is None else support & valid
     sides = (0, -1, 1) if sided else (0,)
     num = den = 0.0
+    k = None
+    if lines and curvature_half:
+        k = _curvature(pos, valid, support, curvature_half, weights)
+    # each side's moments once, for its quadratics and its lines
+    per_side = [_window_fits(pos, valid, support, halves, s, weights, lines, k) for s in sides]
     fits = [
-        _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights)
-        for side in sides
+        _ici(est, var, valid, support, scatter, gamma, correlation)
+        for order in range(len(per_side[0]))  # quadratics first, then lines
+        for est, var in (side_fits[order] for side_fits in per_side)
     ]
-    if lines:
-        k = _curvature(pos, valid, support, curvature_half, weights) if curvature_half else None
-        fits += [
-            _ici(pos, valid, support, scatter, gamma, correlation, halves, side, weights, 1, k)
-            for side in sides
-        ]
     for chosen, f, use in fits:
         w = jnp.where(use, 1.0 / jnp.maximum(f, 1e-3) ** 2, 0.0)
         num = num + w * jnp.where(use, chosen, 0.0)
@@ -268,12 +272,10 @@ def smooth_path(
     return jnp.where(use, out, pos), jnp.where(use, jnp.sqrt(1.0 / jnp.where(use, den, 1.0)), 1.0)
 
 
-def _ici(
-    pos, valid, support, scatter, gamma, correlation, halves, side, weights=None, order=2, curv=None
-):
-    """The ICI rule over the windows of one side (`smooth_path`): (estimate, its std factor,
-    whether a window was usable), each (N,)."""
-    est, var = _window_fits(pos, valid, support, halves, side, weights, order, curv)  # (H, N)
+def _ici(est, var, valid, support, scatter, gamma, correlation):
+    """The ICI rule over one side's window fits (`_window_fits`' (estimate, factor), each
+    (H, N); `smooth_path`): (estimate, its std factor, whether a window was usable), each
+    (N,)."""
     # One centre's own noise bounds a fit through it; an extrapolation (a centre outside the
     # support) can be worse than that.
     factor = jnp.sqrt(jnp.where(support, jnp.minimum(correlation * var, 1.0), correlation * var))
@@ -283,7 +285,7 @@ def _ici(
     hi = lax.cummin(jnp.where(good, est + gamma * sd, jnp.inf), axis=0)
     # The usable windows' intervals up to i intersect; keep the longest usable such window.
     run = jnp.cumprod((lo <= hi).astype(jnp.int32), axis=0).astype(bool) & good
-    index = jnp.arange(len(halves))[:, None]
+    index = jnp.arange(est.shape[0])[:, None]
     best = jnp.max(jnp.where(run, index, -1), axis=0)
     pick = jnp.maximum(best, 0)[None]
     chosen = jnp.take_along_axis(jnp.where(good, est, 0.0), pick, 0)[0]
