@@ -37,6 +37,8 @@ FLAGS = {
     "concurrency-optimised scheduler": "--xla_cpu_enable_concurrency_optimized_scheduler=true",
     "one codegen split": "--xla_cpu_parallel_codegen_split_count=1",
     "fast min/max": "--xla_cpu_enable_fast_min_max=true",
+    "small loops in one function (cslx.environment)": "--xla_backend_extra_options="
+    "xla_cpu_small_while_loop_byte_threshold=1000000000",
 }
 
 
@@ -84,7 +86,8 @@ def _worker(calls: int, cache: str) -> dict:
 
 
 def _run(args: list[str], flags: str) -> dict:
-    env = dict(os.environ, XLA_FLAGS=flags)
+    # CSLX_XLA_SMALL_LOOPS=off: `configure` adds nothing, each set runs its own flags alone
+    env = dict(os.environ, XLA_FLAGS=flags, CSLX_XLA_SMALL_LOOPS="off")
     env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()

@@ -23,3 +23,32 @@ def test_blas_limited_without_importing_scipy():
         [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True
     ).stdout.splitlines()
     assert out == ["False False", "[1]"]
+
+
+def _xla_flags(env_extra: dict) -> str:
+    code = (
+        "import os; from cslx.environment import configure; configure(); "
+        "print(os.environ.get('XLA_FLAGS', ''))"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "CSLX_XLA_SMALL_LOOPS")}
+    env.update(env_extra)
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, check=True
+    ).stdout.strip()
+
+
+def test_small_loops_flag():
+    """`configure` lets XLA's CPU backend compile small while loops as one function (the
+    threshold in XLA_FLAGS), keeps the caller's flags, and leaves a caller's own backend
+    options (or "off") alone."""
+    from cslx.environment import SMALL_LOOP_BYTES
+
+    option = "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold="
+    assert _xla_flags({}) == f"{option}{SMALL_LOOP_BYTES}"
+    assert _xla_flags({"CSLX_XLA_SMALL_LOOPS": "5000"}) == f"{option}5000"
+    assert _xla_flags({"XLA_FLAGS": "--xla_cpu_enable_fast_min_max=true"}) == (
+        f"--xla_cpu_enable_fast_min_max=true {option}{SMALL_LOOP_BYTES}"
+    )
+    own = "--xla_backend_extra_options=other=1"
+    assert _xla_flags({"XLA_FLAGS": own}) == own
+    assert _xla_flags({"CSLX_XLA_SMALL_LOOPS": "off"}) == ""

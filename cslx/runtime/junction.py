@@ -111,6 +111,31 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
     return apex[k], t_apex[k], t_toe[k], h_apex[k], jnp.any(good)
 
 
+#: Points after each one that `_above_far_side` searches on its short path (more: the long one).
+FAR_BAND = 64
+
+
+def _far_low(t, h, ok, width, band: int):
+    """Lowest h among the points j ≥ i, j < i + ``band`` with 0 ≤ t_j − t_i ≤ ``width``, per i.
+
+    The same comparisons and minimum as over every j, restricted to ``band`` shifted copies
+    (an (n, band) rather than an (n, n) array); ``band`` = n is the full search.
+    """
+    n = t.shape[0]
+    if band >= n:
+        dt = t[None, :] - t[:, None]
+        beyond = ok[None, :] & (dt >= 0.0) & (dt <= width)
+        return jnp.min(jnp.where(beyond, h[None, :], jnp.inf), axis=1)
+    pad = lambda x, v: jnp.concatenate([x, jnp.full((band,), v, x.dtype)])  # noqa: E731
+    tp, hp, okp = pad(t, jnp.inf), pad(h, jnp.inf), pad(ok, False)
+    low = jnp.full((n,), jnp.inf, h.dtype)
+    for d in range(band):
+        dt = jax.lax.slice_in_dim(tp, d, d + n) - t
+        keep = jax.lax.slice_in_dim(okp, d, d + n) & (dt >= 0.0) & (dt <= width)
+        low = jnp.minimum(low, jnp.where(keep, jax.lax.slice_in_dim(hp, d, d + n), jnp.inf))
+    return low
+
+
 def _above_far_side(
     t: Float[Array, " n"], h: Float[Array, " n"], ok: Bool[Array, " n"], width: Float[Array, ""]
 ) -> tuple[Float[Array, " n"], Float[Array, " n"]]:
@@ -120,10 +145,33 @@ def _above_far_side(
     the plate just past its far toe, and a bump on the followed bead's flank against the flank
     beyond it, rather than both against one plate line (which sits on the flank where the
     stripe runs mostly on it). ``width`` ≤ 0 returns ``h``.
+
+    Where t rises strictly along the valid points (they are sorted by x_r, and the plate's
+    tilt is small) and the first valid point ``FAR_BAND`` or more places after each one lies
+    more than ``width`` beyond it, every point within ``width`` beyond point i is among the
+    ``FAR_BAND`` after it, and the search runs there alone (`_far_low`, the same values);
+    otherwise over every point (`lax.cond`). The rendered vertical stripe holds ≈ 50 points
+    in 12 mm (0.255 mm a row, sunny video seed 0).
     """
-    dt = t[None, :] - t[:, None]
-    beyond = ok[None, :] & (dt >= 0.0) & (dt <= width)
-    low = jnp.min(jnp.where(beyond, h[None, :], jnp.inf), axis=1)
+    n = t.shape[0]
+    if n > FAR_BAND:
+        idx = jnp.arange(n)
+        # strictly rising: each valid t above every valid t before it
+        before = jax.lax.cummax(jnp.where(ok, t, -jnp.inf))
+        before = jnp.concatenate([jnp.full((1,), -jnp.inf, t.dtype), before[:-1]])
+        rising = jnp.all(~ok | (t > before))
+        # the first valid point FAR_BAND or more places after each one lies beyond width
+        first_ok = jax.lax.cummin(jnp.where(ok, idx, n), reverse=True)
+        j = jnp.concatenate([first_ok[FAR_BAND:], jnp.full((FAR_BAND,), n, first_ok.dtype)])
+        t_far = t[jnp.clip(j, 0, n - 1)]
+        short = jnp.all(~ok | (j >= n) | (t_far - t > width))
+        low = jax.lax.cond(
+            rising & short,
+            lambda: _far_low(t, h, ok, width, FAR_BAND),
+            lambda: _far_low(t, h, ok, width, n),
+        )
+    else:
+        low = _far_low(t, h, ok, width, n)
     low = jnp.where((width > 0.0) & ok & jnp.isfinite(low), low, 0.0)
     return h - low, low
 

@@ -160,6 +160,35 @@ def test_apex_tests_on_the_first_toes_equal_every_point(monkeypatch, bumps):
         assert bool(short.found)
 
 
+@pytest.mark.parametrize("case", ["short", "wide", "unsorted", "few"])
+def test_far_side_band_equals_every_point(monkeypatch, case):
+    """The lowest point beyond each one, searched among the FAR_BAND points after it (t rising
+    and the band reaching past the window), equals the search over every point; a window
+    wider than the band ("wide"), t not rising ("unsorted") and a profile shorter than the
+    band ("few") take the full search (lax.cond) and give the same values too."""
+    rng = np.random.default_rng(11)
+    n = 40 if case == "few" else 480
+    t = np.cumsum(rng.uniform(0.1, 0.4, n)).astype(np.float32)
+    if case == "unsorted":
+        t[100], t[101] = t[101], t[100]
+    h = rng.normal(0.0, 1.0, n).astype(np.float32)
+    ok = rng.random(n) > 0.1
+    width = jnp.float32(40.0 if case == "wide" else 12.0)
+    args = (jnp.asarray(t), jnp.asarray(h), jnp.asarray(ok), width)
+    band = jax.jit(junction._above_far_side)(*args)
+    size = junction.FAR_BAND
+    monkeypatch.setattr(junction, "FAR_BAND", 10**6)  # every point, as before
+    every = jax.jit(junction._above_far_side)(*args)
+    for a, b in zip(band, every, strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    if case == "short":  # the band's own search gives these values
+        low = junction._far_low(*args[:3], width, size)
+        np.testing.assert_array_equal(
+            np.asarray(jnp.where(jnp.asarray(ok) & jnp.isfinite(low), low, 0.0)),
+            np.asarray(every[1]),
+        )
+
+
 def _flank_to_bar(rng, bar_x, hi, lo, bar=(14.0, 1.9), n=480):
     """The vertical stripe on the followed bead's flank from x_r = 125 mm up to the bar's near
     toe, the flank's height going from `hi` (at 150 mm) to `lo` (at the toe); plate beyond."""
