@@ -323,7 +323,9 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   superposed light (clipped centres weighted 0.1, two unclipped ones 0.8 mm low at weight
   1), so the cap fits 13.1 mm wide and 1.4 mm to the other side; frame 0 of the clean pass
   is within 0.1 mm there. Not fixed (a rule on points near the crossing cost other runs,
-  track12e above).
+  track12e above). Tried on that run and not kept: the clip weight spread to the centres
+  within 2 / 3 columns of a weighted run (Steger's window shares its light): frame 0
+  measured 1.43 → 1.35 mm off, offset max 1.46 → 1.38 mm, heading 0.319 → 0.382 / 0.447°.
 
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
