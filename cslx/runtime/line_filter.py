@@ -70,7 +70,45 @@ class KalmanConfig:
     # identical. A first version (span ≥ 5 mm, all pending centres or else the last 3) left
     # the closed loop at 2201 and 2204 unchanged: it never replaced the heading there
     restart_heading_span_mm: float = 2.0
-    heading_valid_deg: float = 3.0
+    # The heading is reported (`Observation.heading_deg`; NaN otherwise) while its standard
+    # deviation, reported with it (`Observation.heading_sd_deg`), is below
+    # `heading_valid_deg`: the filter's sd and, with `heading_valid_model`, at least the
+    # last fused path window's as the measurement model predicts it from its centres'
+    # confidence weights and spacing (`path_heading.predicted_sd`, σ_meas² / conf per centre),
+    # grown by q_heading² per mm since (`PathHeading.model_var`; none after a restart). The
+    # filter's own sd cannot say when the heading is known: it falls to 0.3–0.6° on the frame
+    # the window is first fused, whatever the window's centres (the window's residual sd is
+    # scale-free in the weights, and consecutive windows, fused as news every frame, share
+    # their centres), so 3°, 1.5° or 1° on it all meant "from the first fused window" or
+    # earlier. Issue 12, the 48 dev T approaches (experiments/tracking_diagnostics.py, one
+    # process per seed block, filter variants on the same pipeline outputs; confirmed with
+    # experiments/tracking_sequences.py), filter sd < 3° → model sd < 0.8°: heading goal
+    # misses 2 → 0 (7302 flank shadow 0.633 → 0.450°; 7305 beside shadow 0.536 → 0.273°:
+    # its first 13 beads, under a shadow edge, have confidence 0.02–0.08, so the window waits
+    # for the confident ones), no run newly missing a goal, offsets and T reports identical
+    # (the fused heading is unchanged; only what is reported); heading error mean over the
+    # runs 0.267 → 0.182°. The price: a heading on 58.1 % of the frames instead of 79.3 %
+    # (mean over the runs; ≈ 10 frames, 15 mm, later in a pass, whose first ≈ 30 mm have
+    # none). 1.0 / 1.2 / 1.5°: misses 2 / 2 / 2 (7305 beside shadow met at each, 0.253 /
+    # 0.292 / 0.391°; 7302 flank shadow 0.525 / 0.538 / 0.533°, and 7302 flank sunny newly
+    # 0.509 / 0.501 / 0.501° against 0.479: the window's first 22–30 mm on a flank whose
+    # crossing with the vertical stripe lies on the bead's toe, ±0.5 mm a bead); heading
+    # error mean 0.196 / 0.208 / 0.214°. The filter's sd alone below 1.5° or 1° (7301 +
+    # 7302): 2 misses (7302 flank shadow 0.533°, flank sunny 0.501°). The reported sd is
+    # conservative: RMS of error / reported sd 0.54 over the 1339 frames with a heading
+    # (|z| < 1 on 94 %). Figure 22, dev seed 2201 (experiments/fig22_tracking.py), before →
+    # after, steady error mean / max mm, all turned: clean 0.111 / 0.239 → 0.132 / 0.295,
+    # sunny 0.091 / 0.209 → 0.136 / 0.409, glare 0.144 / 0.762 → 0.121 / 0.554, shadow
+    # 0.113 / 0.431 → 0.102 / 0.228 (the max is the first frame after the turn in each,
+    # where the coast to the T ended; ±0.6 mm with any change of path, `heading_min_span_mm`).
+    # While coasting to the T the heading goes NaN after ≈ 40 mm (the model sd grown past
+    # 0.8°) and the controller steers by the offset alone. Not kept: the model sd at the
+    # last fuse (not grown) below 0.8° and the filter's below 3° (the heading kept while
+    # coasting): the 48 runs the same but 1201 flank sunny (0.328 → 0.317°), Figure 22
+    # clean 0.123 / 0.239, sunny 0.271 / 0.437 (estimate error mean 0.157 mm), glare
+    # 0.124 / 0.609 mm
+    heading_valid_deg: float = 0.8
+    heading_valid_model: bool = True
     decay: float = 0.85  # confidence per frame without a bead
     junction_window: int = 10
     junction_tol_mm: float = 6.0

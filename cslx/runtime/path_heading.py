@@ -76,11 +76,16 @@ class PathHeading:
         self.points = np.zeros((0, 4))
         self._restarts = 0
         self._var = math.inf  # the last fused window's heading variance, rad², grown by travel
+        # the same window's variance as the measurement model predicts it (`predicted_sd`
+        # with the centres' confidence weights), grown by travel like `_var`: what the
+        # tracker reports as the heading's uncertainty (`KalmanConfig.heading_valid_model`)
+        self.model_var = math.inf
 
     def move(self, d: float, delta: float) -> None:
         if not len(self.points):
             return
         self._var += self.c.q_heading**2 * abs(d)
+        self.model_var += self.c.q_heading**2 * abs(d)
         x, y = carry(self.points[:, 0], self.points[:, 1], d, delta)
         self.points = np.stack([x, y, *self.points[:, 2:].T], 1)
         self.points = self.points[self.points[:, 0] >= self.x_ref - self.c.heading_window_mm]
@@ -103,7 +108,7 @@ class PathHeading:
         if kf.restarts != self._restarts:  # a new weld or a re-acquisition: forget the old
             self._restarts = kf.restarts
             self.points = np.zeros((0, 4))
-            self._var = math.inf
+            self._var = self.model_var = math.inf
         if not accepted:
             return NAN, NAN
         row = np.array([[x, y, max(confidence, 0.05), width]])
@@ -114,11 +119,9 @@ class PathHeading:
         if c.heading_width_tol > 0:
             m = np.median(h[:, 3])
             w = w / (1.0 + ((h[:, 3] - m) / (c.heading_width_tol * m)) ** 4)
-        sd_pred = NAN
-        if c.heading_sd_model or c.heading_max_sd_deg > 0:
-            sd_pred = predicted_sd(h[:, 0], w, c.sigma_meas)
-            if c.heading_max_sd_deg > 0 and not sd_pred <= math.radians(c.heading_max_sd_deg):
-                return NAN, NAN
+        sd_pred = predicted_sd(h[:, 0], w, c.sigma_meas)
+        if c.heading_max_sd_deg > 0 and not sd_pred <= math.radians(c.heading_max_sd_deg):
+            return NAN, NAN
         _, th, sd = robust_line(
             h[:, 0],
             h[:, 1],
@@ -134,4 +137,5 @@ class PathHeading:
             sd = max(sd, sd_pred)
         if kf.update_heading(th, sd, gain=1.0 / self._var if c.heading_gain_only else 0.0):
             self._var = max(sd, math.radians(c.sigma_heading_floor_deg)) ** 2
+            self.model_var = sd_pred**2
         return math.degrees(th), math.degrees(sd)

@@ -61,7 +61,10 @@ filter over s = (e, θ):
   restarts, and fused only on frames whose bead was accepted (`cslx.runtime.path_heading`
   says why). Numbers in `KalmanConfig`.
 
-Reported heading is NaN until its standard deviation is below `heading_valid_deg`.
+Reported heading is NaN until its standard deviation is below `heading_valid_deg` (0.8°), the
+standard deviation (`Observation.heading_sd_deg`) being the filter's and at least the last fused
+path window's as its centres' confidence and spacing predict it (`KalmanConfig.heading_valid_model`:
+a window of unconfident beads waits for more path).
 
 Confidence ∈ [0, 1]: the bead detector's confidence (square-rooted: the product of four
 factors in `cslx.runtime.weld` is ≈ 0.2–0.7 on good rendered frames) when a bead was accepted,
@@ -155,7 +158,9 @@ class Observation:
     """What the tracker reports for one frame (docs/contracts.md, tracking log; NaN = unknown).
 
     frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
-    filtered weld line. bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
+    filtered weld line. heading_sd_deg: the heading's standard deviation (reported whether or
+    not the heading is: NaN heading while it is ≥ `KalmanConfig.heading_valid_deg`).
+    bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
     junction, junction_x_mm, junction_y_mm: a confirmed crossing weld, its x_r and the y_r
     where it was measured (the vertical stripe). confidence: [0, 1].
     latency_ms: wall time of `step`. med_steps: MED fixed-point steps (h + v) this frame.
@@ -168,6 +173,7 @@ class Observation:
     t: float
     offset_mm: float = NAN
     heading_deg: float = NAN
+    heading_sd_deg: float = NAN
     bead_width_mm: float = NAN
     bead_height_mm: float = NAN
     junction: bool = False
@@ -212,6 +218,7 @@ class Observation:
             "med_steps": self.med_steps,
             "status": self.status,
             "stripe_ok": int(bool(self.stripe_ok)),
+            "heading_sd_deg": self.heading_sd_deg,
         }
         keys = (
             "measured_offset_mm",
@@ -549,6 +556,9 @@ class Tracker:
         if kf.initialised:
             obs.offset_mm = float(kf.x[0])
             sd_e, sd_th = math.sqrt(kf.P[0, 0]), math.sqrt(kf.P[1, 1])
+            if c.heading_valid_model and math.isfinite(self._path.model_var):
+                sd_th = max(sd_th, math.sqrt(self._path.model_var))
+            obs.heading_sd_deg = math.degrees(sd_th)
             if math.degrees(sd_th) < c.heading_valid_deg:
                 obs.heading_deg = math.degrees(kf.x[1])
             obs.confidence = float(np.clip(self._confidence / (1.0 + (sd_e / 2.0) ** 2), 0.0, 1.0))

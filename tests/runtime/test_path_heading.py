@@ -174,3 +174,59 @@ def test_sd_model_floors_the_fused_sd():
     h = path.points
     want = math.degrees(predicted_sd(h[:, 0], h[:, 2], c.sigma_meas))
     assert math.isfinite(th) and sd == pytest.approx(want)
+
+
+def _reported_from(confidence: float, valid_deg: float = 0.8) -> float:
+    """Travel (mm) at which the window's model sd (`PathHeading.model_var`, which the
+    tracker reports as the heading's uncertainty and requires below
+    `KalmanConfig.heading_valid_deg`) first falls below `valid_deg` on a straight pass,
+    one bead a frame 1.5 mm apart, each with this confidence."""
+    from cslx.runtime.path_heading import predicted_sd
+
+    c = KalmanConfig()
+    rng = np.random.default_rng(2)
+    kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
+    for k in range(60):
+        if k:
+            kf.predict(1.5, 0.0)
+            path.move(1.5, 0.0)
+        y = math.tan(THETA) * 1.5 * k + rng.normal(0.0, 0.05)
+        ok = kf.update(X_REF, y, confidence)
+        th, _ = path.update(kf, X_REF, y, confidence, 14.0, ok)
+        if math.isfinite(th):  # fused: the model sd is the fused window's prediction
+            h = path.points
+            want = predicted_sd(h[:, 0], h[:, 2], c.sigma_meas)
+            assert path.model_var == pytest.approx(want**2, rel=1e-9)
+        if math.degrees(math.sqrt(path.model_var)) < valid_deg:
+            return 1.5 * k
+    return math.inf
+
+
+def test_model_sd_waits_longer_for_less_confident_beads():
+    """The reported heading's uncertainty follows the centres' confidence: beads of
+    confidence 0.2 need a longer stretch of path than beads of 0.9 before the window's
+    heading is known to 0.8°, while the fused window (22 mm span) starts at the same frame;
+    the window's own residual sd, scale-free in the weights, cannot tell them apart."""
+    hi, lo = _reported_from(0.9), _reported_from(0.2)
+    assert 22.5 <= hi < lo < math.inf, (hi, lo)
+    assert _first_fused(0.9) == _first_fused(0.2)
+
+
+def test_model_sd_grows_with_travel_and_restarts_forget_it():
+    """Without beads the reported model variance grows by q_heading² per mm (the filter's
+    random walk); a restart forgets it."""
+    c = KalmanConfig()
+    kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
+    for k in range(30):
+        if k:
+            kf.predict(1.5, 0.0)
+            path.move(1.5, 0.0)
+        ok = kf.update(X_REF, math.tan(THETA) * 1.5 * k, 0.6)
+        path.update(kf, X_REF, math.tan(THETA) * 1.5 * k, 0.6, 14.0, ok)
+    var = path.model_var
+    assert math.isfinite(var)
+    path.move(30.0, 0.0)
+    assert path.model_var == pytest.approx(var + c.q_heading**2 * 30.0)
+    kf.restarts += 1  # a re-acquisition
+    path.update(kf, X_REF, 0.0, 0.6, 14.0, False)
+    assert path.model_var == math.inf
