@@ -132,7 +132,17 @@ def _first_fused(confidence: float, **kw) -> float:
     import dataclasses
 
     c = dataclasses.replace(KalmanConfig(), **kw)
-    rng = np.random.default_rng(1)
+    for k, th, _ in _straight_pass(c, confidence, seed=1):
+        if math.isfinite(th):
+            return 1.5 * k
+    return math.inf
+
+
+def _straight_pass(c: KalmanConfig, confidence: float, seed: int):
+    """A straight pass of 60 frames, one bead a frame 1.5 mm apart (0.05 mm noise), each with
+    this confidence, through a filter and its path window: yields (frame, window heading,
+    the window) after each frame's update."""
+    rng = np.random.default_rng(seed)
     kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
     for k in range(60):
         if k:
@@ -141,9 +151,7 @@ def _first_fused(confidence: float, **kw) -> float:
         y = math.tan(THETA) * 1.5 * k + rng.normal(0.0, 0.05)
         ok = kf.update(X_REF, y, confidence)
         th, _ = path.update(kf, X_REF, y, confidence, 14.0, ok)
-        if math.isfinite(th):
-            return 1.5 * k
-    return math.inf
+        yield k, th, path
 
 
 def test_max_sd_sets_the_span_by_confidence():
@@ -184,15 +192,7 @@ def _reported_from(confidence: float, valid_deg: float = 0.8) -> float:
     from cslx.runtime.path_heading import predicted_sd
 
     c = KalmanConfig()
-    rng = np.random.default_rng(2)
-    kf, path = WeldLineFilter(c, X_REF), PathHeading(c, X_REF)
-    for k in range(60):
-        if k:
-            kf.predict(1.5, 0.0)
-            path.move(1.5, 0.0)
-        y = math.tan(THETA) * 1.5 * k + rng.normal(0.0, 0.05)
-        ok = kf.update(X_REF, y, confidence)
-        th, _ = path.update(kf, X_REF, y, confidence, 14.0, ok)
+    for k, th, path in _straight_pass(c, confidence, seed=2):
         if math.isfinite(th):  # fused: the model sd is the fused window's prediction
             h = path.points
             want = predicted_sd(h[:, 0], h[:, 2], c.sigma_meas)
