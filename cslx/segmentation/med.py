@@ -101,6 +101,7 @@ __all__ = [
     "med",
     "med_apply",
     "med_objective",
+    "med_output",
     "med_prepare",
     "med_update",
     "default_filter_length",
@@ -429,6 +430,33 @@ def med_apply(
     if delay not in DELAYS:
         raise ValueError(f"delay must be one of {', '.join(DELAYS)}, got {delay!r}")
     return _apply(I, W, axis, int(taper), delay, float(ridge_sigma))
+
+
+@eqx.filter_jit
+def _output(I, W, delay, axis, taper):
+    pb = med_prepare(I, axis=axis, L=W.shape[0], taper=taper)
+    out = _f.shifted_output(W, delay, pb)
+    return out.T if axis == 0 else out
+
+
+def med_output(
+    I: Float[Array, "h w"],
+    W: Float[Array, " L"],
+    delay: Float[Array, ""],
+    *,
+    axis: int = 0,
+    taper: int = DEFAULT_TAPER,
+) -> Float[Array, "h w"]:
+    """B(i + delay) of eq. (18) for a known filter W (sign included) and a known delay.
+
+    `med_apply` without the delay measurement (no statistics pass, no ridge search): one
+    forward and one inverse FFT pass. The pipeline's strided full frame uses it with the
+    delay `med` measured on the segments it was run on (`PipelineConfig.med_stride`).
+    """
+    I = _check_image(I)
+    W = jnp.asarray(W, I.dtype)
+    _length(I, axis, W.shape[0])
+    return _output(I, W, jnp.asarray(delay, I.dtype), axis, int(taper))
 
 
 def med_objective(
