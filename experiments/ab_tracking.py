@@ -14,9 +14,10 @@ keeps the outputs bit for bit).
 same `process_frame` with the tracker's `tracking_config()`: no MED, domed clipped-core
 fill), ``fullframe`` (the cold full frame of `experiments.bench_speed`: `process_frame` with
 ``roi=False`` from `init_state` every frame, MED on the whole frame from the cold start; each
-call starts from the same initial state) or ``tracker`` (`Tracker.step` on NumPy frames, the robot's loop end to end: its one
-compiled step, the transfers to the host and the Kalman filter; compared outputs: the
-step's per-frame values, ``Observation.raw``, and the filtered offset and heading).
+call starts from the same initial state) or ``tracker`` (`Tracker.step` on NumPy frames,
+the robot's loop end to end: its one compiled step, the transfers to the host and the
+Kalman filter; compared outputs: the step's per-frame values, ``Observation.raw``, and the
+filtered offset and heading).
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev HEAD~1 --calls 300
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev main --program tracker
