@@ -78,3 +78,53 @@ def test_med_output_is_med_apply_at_its_delay(axis):
     got = med_output(I, W, delay, axis=axis)
     assert got.shape == I.shape
     np.testing.assert_allclose(np.asarray(got), np.asarray(out), rtol=1e-10, atol=1e-9)
+
+
+def dense_ridge_positions(Y, sigma):
+    """The reference: s' and s'' filtered over the whole row (NumPy), read at the argmax."""
+    Y = np.asarray(Y, float)
+    n = Y.shape[-1]
+    h = min(int(4.0 * sigma + 0.5), n - 1)
+    o = np.arange(h + 1, dtype=float)
+    g = np.exp(-0.5 * (o / sigma) ** 2)
+    g /= g[0] + 2 * g[1:].sum()
+    g1 = -o / sigma**2 * g
+    g2 = (o**2 / sigma**4 - 1 / sigma**2) * g
+    Yp = np.pad(Y, ((0, 0), (h, h)))
+    d1 = sum(g1[j] * (Yp[:, h - j : h - j + n] - Yp[:, h + j : h + j + n]) for j in range(1, h + 1))
+    d2 = g2[0] * Y + sum(
+        g2[j] * (Yp[:, h - j : h - j + n] + Yp[:, h + j : h + j + n]) for j in range(1, h + 1)
+    )
+    rows = np.arange(Y.shape[0])
+    k = np.argmax(Y, axis=-1)
+    t = -d1[rows, k] / np.where(d2[rows, k] < 0, d2[rows, k], -1.0)
+    k = np.clip(k + np.clip(np.round(t), -h, h).astype(int), 0, n - 1)
+    t2 = d2[rows, k]
+    t = -d1[rows, k] / np.where(t2 < 0, t2, -1.0)
+    return k + t, (t2 < 0) & (np.abs(t) <= 0.6)
+
+
+def test_ridge_positions_equal_the_dense_filtering():
+    """`med_fft.ridge_positions` evaluates s', s'' only at the two samples it reads: the same
+    positions as filtering whole rows, ridges near both ends and ties included."""
+    rng = np.random.default_rng(21)
+    n = 97
+    i = np.arange(n)
+    centres = np.concatenate([rng.uniform(0, n - 1, 40), [0.0, 1.3, n - 1.0, n - 2.4, 50.0]])
+    Y = 50 * np.exp(-0.5 * ((i[None, :] - centres[:, None]) / 2.2) ** 2)
+    Y += rng.normal(0, 2.0, Y.shape)
+    Y[-1] = 0.0  # a constant row: the first sample, no ridge
+    Y[-2, 30:33] = 80.0  # a tie: the first maximum
+    ref, ok_ref = dense_ridge_positions(Y, 2.0)
+    got, ok = jax.jit(med_fft.ridge_positions, static_argnums=1)(jnp.asarray(Y), 2.0)
+    np.testing.assert_array_equal(np.asarray(ok), ok_ref)
+    np.testing.assert_allclose(np.asarray(got)[ok_ref], ref[ok_ref], rtol=0, atol=1e-9)
+    assert ok_ref.sum() > 30
+
+
+def test_first_argmax_is_argmax():
+    rng = np.random.default_rng(2)
+    Y = rng.integers(0, 5, (50, 33)).astype(float)  # many ties
+    np.testing.assert_array_equal(
+        np.asarray(med_fft.first_argmax(jnp.asarray(Y))), np.argmax(Y, axis=-1)
+    )
