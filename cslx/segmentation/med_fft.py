@@ -191,8 +191,11 @@ def update(
     """
     st = stats(W, pb)
     L, n = pb.L, pb.n
-    Cz = st.ba * st.ba * st.ba + 1j * (st.bb * st.bb * st.bb)
-    Ca, Cb = _split(jnp.fft.fft(Cz, n=n, axis=-1), n)
+    # Two real FFTs of the cubes, not one packed complex FFT and its Hermitian split: the
+    # split's reversal and concatenation cost more than the FFT saves (issue 13: 160×720 and
+    # 120×960 pairs, 0.26–0.29 → 0.16 ms on this CPU).
+    Ca = jnp.fft.rfft(st.ba * st.ba * st.ba, n=n, axis=-1)
+    Cb = jnp.fft.rfft(st.bb * st.bb * st.bb, n=n, axis=-1)
     p = pb.Xa.shape[0]
     G = st.v[:p] @ (jnp.conj(pb.Xa) * Ca) + st.v[p:] @ (jnp.conj(pb.Xb) * Cb)
     bvec = jnp.fft.irfft(G, n=n)[:L]
