@@ -12,12 +12,16 @@ keeps the outputs bit for bit).
 
 ``--program`` picks what is timed: ``pipeline`` (the above, the default), ``tracking`` (the
 same `process_frame` with the tracker's `tracking_config()`: no MED, domed clipped-core
-fill) or ``tracker`` (`Tracker.step` on NumPy frames, the robot's loop end to end: its one
-compiled step, the transfers to the host and the Kalman filter; compared outputs: the
-step's per-frame values, ``Observation.raw``, and the filtered offset and heading).
+fill), ``fullframe`` (the cold full frame of `experiments.bench_speed`: `process_frame` with
+``roi=False`` from `init_state` every frame, MED on the whole frame from the cold start; each
+call starts from the same initial state) or ``tracker`` (`Tracker.step` on NumPy frames,
+the robot's loop end to end: its one compiled step, the transfers to the host and the
+Kalman filter; compared outputs: the step's per-frame values, ``Observation.raw``, and the
+filtered offset and heading).
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev HEAD~1 --calls 300
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev main --program tracker
+    OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev main --program fullframe
 """
 
 from __future__ import annotations
@@ -61,6 +65,15 @@ def tracker(package: str, frame, program: str = "pipeline"):
     else:
         config = pipeline.PipelineConfig()
     state = pipeline.init_state(config, sensor.camera.image_size)
+    if program == "fullframe":
+
+        def cold(rgb, state):
+            result, _ = pipeline.process_frame(sensor, config, rgb, state, roi=False)
+            return jax.block_until_ready(result), state
+
+        for _ in range(3):
+            cold(frame, state)
+        return cold, state
 
     def step(rgb, state):
         result, state = pipeline.process_frame(sensor, config, rgb, state)
@@ -99,9 +112,10 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0, help="video seed (bench_speed's)")
     ap.add_argument(
         "--program",
-        choices=("pipeline", "tracking", "tracker"),
+        choices=("pipeline", "tracking", "fullframe", "tracker"),
         default="pipeline",
-        help="process_frame with PipelineConfig() / with tracking_config(), or Tracker.step",
+        help="process_frame with PipelineConfig() / with tracking_config() / cold with "
+        "roi=False, or Tracker.step",
     )
     args = ap.parse_args(argv)
     import jax

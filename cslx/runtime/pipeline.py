@@ -47,7 +47,7 @@ from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from ..segmentation.clipped import background_step, centre_runs
-from ..segmentation.med import initial_filter, med, med_apply
+from ..segmentation.med import initial_filter, med, med_apply, med_output
 from ..segmentation.med_bands import band_snr_scale, first_peak
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
@@ -179,8 +179,10 @@ def _stripe(
         def out():
             if stride == 1:
                 return r.output
-            kind = "centre" if symmetric else config.med_delay
-            return med_apply(I, r.filter, axis=axis, delay=kind, ridge_sigma=config.sigma)[0]
+            if symmetric:
+                return med_apply(I, r.filter, axis=axis, delay="centre")[0]
+            # the delay measured on the strided segments (`med_output`: one FFT pass pair)
+            return med_output(I, r.filter, r.delay, axis=axis)
 
         B = lax.cond(ok, out, lambda: I)  # not a select (band_input's notes)
         steps, kurt = r.steps.astype(jnp.int32), jnp.where(ok, r.kurtosis, jnp.nan)

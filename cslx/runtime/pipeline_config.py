@@ -65,7 +65,12 @@ class PipelineConfig(eqx.Module):
         impulse the 16-tap linear-phase band filters converged elsewhere (saturated h
         median 0.08 → 29 mm, clean 0.119 → 0.148 mm).
     med_stride: on the full frame, MED's filter is found on every k-th column (row) and
-        then applied to all of them (`cslx.segmentation.med.med_apply`): one filter serves
+        then applied to all of them, shifted back by the delay measured on those same
+        segments (`cslx.segmentation.med.med_output`; measuring it again on the whole frame,
+        `med_apply`, cost a statistics pass and a ridge search more, ≈ 2–3 ms of the cold
+        full frame; on the dev frames below, frame 0 of each red-laser condition, centres
+        moved by median 0.0013 px, p99 0.014 px, max 0.50 px on a few columns of one
+        saturated-sunny frame whose p95 error is 95 mm either way). One filter serves
         the whole frame, and 320 / 240 segments pin it down as well as 640 / 480 (issue 13,
         `experiments.med_start --pipeline --full-frame`, dev seeds 7100–7113, 2 frames of
         each red-laser condition: k = 2 / 3 against 1, every condition within ±0.007 mm

@@ -19,9 +19,10 @@ docs/corrections.md, 5 (X the centred input, U_j = Σ_i (B_ij − μ_j)², k_j =
 R is a weighted sum of segment autocorrelations (Toeplitz), b a weighted sum of
 cross-correlations: both are accumulated in the Fourier domain (two segments packed in one
 complex FFT, length the smallest 5-smooth n ≥ M + L − 1, e.g. 720 for M = 480, L = 240),
-so one iteration costs one inverse and one forward batched FFT plus an L×L Cholesky
-solve (small diagonal loading). `optimistix.fixed_point` with `FixedPointIteration` runs
-the iteration.
+so one iteration costs one inverse and one forward batched FFT plus an L×L Toeplitz
+solve (small diagonal loading; Levinson's O(L²) recursion on the CPU, a Cholesky
+factorisation elsewhere: `med_fft.toeplitz_solve`). `optimistix.fixed_point` with
+`FixedPointIteration` runs the iteration.
 
 Objective forms. The literal eq. (19) and the normalised form of correction 4 (mean over
 segments of the sample excess kurtosis (M+L−1) k_j − 3) are both increasing functions of
@@ -74,10 +75,12 @@ Choices where the paper is vague:
   below ``tol``, or after ``max_steps``. The filter itself converges more slowly than the
   kurtosis (flat directions of the objective), so a tolerance on the filter would cost
   many more iterations for no visible change of the output.
-- Speed: an iteration is one packed inverse FFT, one forward FFT and an L×L Cholesky.
-  The Cholesky goes through LAPACK (OpenBLAS): for L > 256 OpenBLAS's threads, on a
-  loaded machine, made it 100–1000× slower in our measurements; run with
-  ``OPENBLAS_NUM_THREADS=1`` (0.5 ms for L = 320).
+- Speed: an iteration is one packed inverse FFT, one forward FFT and an L×L Toeplitz
+  solve. On the CPU the solve is Levinson's recursion (0.12 ms for L = 320, against 0.45 ms
+  for LAPACK's Cholesky; the cold full frame 23.3 → 20.8 ms median, issue 13). The
+  linear-phase (``symmetric``) step and other platforms use a Cholesky through LAPACK
+  (OpenBLAS): for L > 256 OpenBLAS's threads, on a loaded machine, made it 100–1000×
+  slower in our measurements; run with ``OPENBLAS_NUM_THREADS=1``.
 
 Every function here is pure on one frame; `med` is jit-compiled (equinox filter_jit:
 strings and ints are static) and vmap-able over frames. Float32 is the speed path.
@@ -101,6 +104,7 @@ __all__ = [
     "med",
     "med_apply",
     "med_objective",
+    "med_output",
     "med_prepare",
     "med_update",
     "default_filter_length",
@@ -429,6 +433,33 @@ def med_apply(
     if delay not in DELAYS:
         raise ValueError(f"delay must be one of {', '.join(DELAYS)}, got {delay!r}")
     return _apply(I, W, axis, int(taper), delay, float(ridge_sigma))
+
+
+@eqx.filter_jit
+def _output(I, W, delay, axis, taper):
+    pb = med_prepare(I, axis=axis, L=W.shape[0], taper=taper)
+    out = _f.shifted_output(W, delay, pb)
+    return out.T if axis == 0 else out
+
+
+def med_output(
+    I: Float[Array, "h w"],
+    W: Float[Array, " L"],
+    delay: Float[Array, ""],
+    *,
+    axis: int = 0,
+    taper: int = DEFAULT_TAPER,
+) -> Float[Array, "h w"]:
+    """B(i + delay) of eq. (18) for a known filter W (sign included) and a known delay.
+
+    `med_apply` without the delay measurement (no statistics pass, no ridge search): one
+    forward and one inverse FFT pass. The pipeline's strided full frame uses it with the
+    delay `med` measured on the segments it was run on (`PipelineConfig.med_stride`).
+    """
+    I = _check_image(I)
+    W = jnp.asarray(W, I.dtype)
+    _length(I, axis, W.shape[0])
+    return _output(I, W, jnp.asarray(delay, I.dtype), axis, int(taper))
 
 
 def med_objective(

@@ -104,8 +104,14 @@ def _split(Z, n):
     return 0.5 * (zf + zr), -0.5j * (zf - zr)
 
 
-def _segment_sums(B, L, m):
+def _segment_sums(B, L, m, total):
     """Centred output and per-segment energy U (eq. (23)) and 4th power sums.
+
+    ``total``: Σ_i B_i per (packed) segment, the DC bin of B's spectrum: the mean comes
+    from it, not from a masked complex sum over B, which XLA's CPU backend ran as a
+    materialised select and a tree reduction, ≈ 0.3 ms of a 0.9 ms step on 120×960
+    (issue 13; B is zero past m + L − 1 in exact arithmetic, so the sums agree to
+    rounding).
 
     B holds the n ≥ m + L − 1 samples of the circular convolution; only the first m + L − 1
     are the full convolution. They are selected with a mask, not a slice: the centred
@@ -115,12 +121,11 @@ def _segment_sums(B, L, m):
     run over n samples, the last n − m − L + 1 of them zero).
     """
     n, mL = B.shape[-1], m + L - 1
+    mean = (total / mL)[:, None]
     if n == mL:
-        b = B - jnp.mean(B, axis=-1, keepdims=True)
+        b = B - mean
     else:
-        keep = jnp.arange(n) < mL
-        mean = jnp.sum(jnp.where(keep, B, 0), axis=-1, keepdims=True) / mL
-        b = jnp.where(keep, B - mean, 0)
+        b = jnp.where(jnp.arange(n) < mL, B - mean, 0)
     ba, bb = b.real, b.imag
     ba2, bb2 = ba * ba, bb * bb
     U = jnp.concatenate([jnp.sum(ba2, -1), jnp.sum(bb2, -1)])
@@ -145,8 +150,9 @@ def filter_spectrum(W: Float[Array, " L"], n: int) -> Complex[Array, " n"]:
 
 def stats(W: Float[Array, " L"], pb: Problem) -> Stats:
     """Output B (one inverse FFT for two segments) and the weights of eq. (22)."""
-    B = jnp.fft.ifft(pb.Z * filter_spectrum(W, pb.n), axis=-1)
-    ba, bb, U, F = _segment_sums(B, pb.L, pb.m)
+    S = pb.Z * filter_spectrum(W, pb.n)
+    B = jnp.fft.ifft(S, axis=-1)
+    ba, bb, U, F = _segment_sums(B, pb.L, pb.m, S[:, 0])
     # Constant segments (zero variance: a padded segment, a black or clipped column) carry
     # no kurtosis; give them zero weight instead of 0/0.
     ok = U > jnp.finfo(U.dtype).eps * jnp.max(U)
@@ -183,7 +189,7 @@ def update(
     b_k  = Σ_j U_j⁻² Σ_i (B_ij − μ_j)³ X_{i−k,j}  (weighted cross-correlation)
     Both are sums over segments of correlations, accumulated in the frequency domain and
     brought back with one short inverse FFT each. ``loading`` adds loading·R_00 to the
-    diagonal before the Cholesky factorisation.
+    diagonal before the solve (`toeplitz_solve`).
 
     ``symmetric``: the same stationarity condition restricted to linear-phase filters
     W = P h (`symmetric_basis`): the gradient of eq. (19) projected on them vanishes when
@@ -191,21 +197,81 @@ def update(
     """
     st = stats(W, pb)
     L, n = pb.L, pb.n
-    Cz = st.ba * st.ba * st.ba + 1j * (st.bb * st.bb * st.bb)
-    Ca, Cb = _split(jnp.fft.fft(Cz, n=n, axis=-1), n)
+    # Two real FFTs of the cubes, not one packed complex FFT and its Hermitian split: the
+    # split's reversal and concatenation cost more than the FFT saves (issue 13: 160×720 and
+    # 120×960 pairs, 0.26–0.29 → 0.16 ms on this CPU).
+    Ca = jnp.fft.rfft(st.ba * st.ba * st.ba, n=n, axis=-1)
+    Cb = jnp.fft.rfft(st.bb * st.bb * st.bb, n=n, axis=-1)
     p = pb.Xa.shape[0]
     G = st.v[:p] @ (jnp.conj(pb.Xa) * Ca) + st.v[p:] @ (jnp.conj(pb.Xb) * Cb)
     bvec = jnp.fft.irfft(G, n=n)[:L]
     r = weighted_autocorrelation(st.w, pb)[:L]
-    idx = jnp.abs(jnp.arange(L)[:, None] - jnp.arange(L)[None, :])
-    R = r[idx] + (loading * r[0]) * jnp.eye(L, dtype=r.dtype)
+    r = r.at[0].multiply(1 + loading)  # R + loading·R_00·I: the same Toeplitz form
     if symmetric:
         P = jnp.asarray(symmetric_basis(L), r.dtype)
-        h = jsl.cho_solve(jsl.cho_factor(P.T @ R @ P, lower=True), P.T @ bvec)
+        h = jsl.cho_solve(jsl.cho_factor(P.T @ toeplitz(r) @ P, lower=True), P.T @ bvec)
         x = P @ h
     else:
-        x = jsl.cho_solve(jsl.cho_factor(R, lower=True), bvec)
+        x = toeplitz_solve(r, bvec)
     return x / jnp.linalg.norm(x), st
+
+
+def toeplitz(r: Float[Array, " L"]) -> Float[Array, "L L"]:
+    """The symmetric Toeplitz matrix R_kl = r(|k − l|)."""
+    L = r.shape[0]
+    return r[jnp.abs(jnp.arange(L)[:, None] - jnp.arange(L)[None, :])]
+
+
+def toeplitz_solve(r: Float[Array, " L"], b: Float[Array, " L"]) -> Float[Array, " L"]:
+    """R⁻¹ b for the positive definite symmetric Toeplitz R_kl = r(|k − l|) (eq. (22)).
+
+    On the CPU by the Levinson recursion (`levinson`, O(L²)); elsewhere (GPU) by a Cholesky
+    factorisation of R (O(L³) but one library call; a loop of L small steps would be L
+    kernel launches there). Issue 13, this 2-core CPU, float32, one solve: L = 240
+    0.23 → 0.07 ms, L = 320 0.45 → 0.12 ms (p10 of 200 calls, load 5), the same relative
+    error against SciPy's float64 `solve_toeplitz` (2e-3 for both on a system of
+    condition 7e5).
+    """
+    return lax.platform_dependent(
+        r,
+        b,
+        cpu=levinson,
+        default=lambda r, b: jsl.cho_solve(jsl.cho_factor(toeplitz(r), lower=True), b),
+    )
+
+
+def levinson(r: Float[Array, " L"], b: Float[Array, " L"]) -> Float[Array, " L"]:
+    """Levinson's recursion for R x = b, R_kl = r(|k − l|) positive definite.
+
+    Golub & Van Loan, Matrix Computations, Algorithm 4.7.2 (on R / r(0), unit diagonal):
+    the solution x and the Yule–Walker vector y of the leading k×k system grow one order a
+    step, each from inner products with r(1..k) reversed, O(L) work per step. The loop
+    touches only a few L-vectors, so with `cslx.environment.small_loops` XLA's CPU backend
+    runs it as one function.
+    """
+    L = r.shape[0]
+    t, b = r / r[0], b / r[0]
+    i = jnp.arange(L)
+    zero = jnp.zeros(L, r.dtype)
+    t_rev = jnp.concatenate([t[::-1], zero])  # t(k − j) = t_rev[L − 1 − k + j]
+    t_next = jnp.concatenate([t[1:], t[-1:]])  # t(k + 1); the last entry is unused
+
+    def step(k, carry):
+        x, y, beta, alpha = carry
+        beta = (1 - alpha * alpha) * beta
+        tk = jnp.where(i < k, lax.dynamic_slice(t_rev, (L - 1 - k,), (L,)), 0)  # t(k − j)
+        yk = lax.dynamic_slice(jnp.concatenate([y[::-1], zero]), (L - k,), (L,))  # y(k−1−j)
+        mu = (b[k] - tk @ x) / beta
+        alpha = (-t_next[k] - tk @ y) / beta
+        x = jnp.where(i == k, mu, x + mu * yk)
+        y = jnp.where(i == k, alpha, y + alpha * yk)
+        return x, y, beta, alpha
+
+    if L == 1:
+        return b
+    x0, y0 = zero.at[0].set(b[0]), zero.at[0].set(-t[1])
+    x, *_ = lax.fori_loop(1, L, step, (x0, y0, jnp.ones((), r.dtype), -t[1]))
+    return x
 
 
 def centre_sign(W: Float[Array, " L"], w: Float[Array, " s2"], pb: Problem):
@@ -316,10 +382,13 @@ def ridge_positions(Y: Float[Array, "s k"], sigma: float):
     Start at the brightest sample k, move once to the nearest sample of the
     Gaussian-smoothed ridge and take Steger's 1-D Newton offset t = −s'(k)/s''(k) there, with
     s the row smoothed by a Gaussian of scale σ, truncated at 4σ (the 1-D form of the
-    detector the pipeline runs on the MED output). s' and s'' are sums of shifted slices with
-    folded taps (zero outside the row) and are read at k with a one-hot masked sum (no
-    gather: gathers are slow on the CPU). ok: a maximum (s'' < 0) within 0.6 sample
-    (Steger's offset bound in cslx).
+    detector the pipeline runs on the MED output). s' and s'' are needed at two samples a
+    row only, so they are evaluated there, from the 2h + 1 samples around each (h the
+    truncation; zero outside the row), with folded taps, not filtered over the whole row,
+    and k is found by `first_argmax`. Issue 13, the ridge delay of the cold full frame's
+    strided MED (p10 of 150 calls, beyond the statistics pass): 160 columns of 719 samples
+    1.61 → 0.20 ms, 240 rows of 959 samples 3.26 → 0.26 ms; the same positions to float
+    rounding. ok: a maximum (s'' < 0) within 0.6 sample (Steger's offset bound in cslx).
     """
     n = Y.shape[-1]
     h = min(int(4.0 * sigma + 0.5), n - 1)
@@ -328,31 +397,39 @@ def ridge_positions(Y: Float[Array, "s k"], sigma: float):
     g /= g[0] + 2 * g[1:].sum()
     g1 = -o / sigma**2 * g  # g'(o); odd
     g2 = (o**2 / sigma**4 - 1 / sigma**2) * g  # g''(o); even
-    Yp = jnp.pad(Y, ((0, 0), (h, h)))
-
-    def shifted(k):
-        return lax.slice_in_dim(Yp, h + k, h + k + n, axis=1)
-
-    # s'(i) = Σ_o y(i − o) g'(o) = Σ_{o>0} g'(o) (y(i − o) − y(i + o)); s'' alike, even.
-    d1 = jnp.zeros_like(Y)
-    d2 = float(g2[0]) * Y
-    for k in range(1, h + 1):
-        before, after = shifted(-k), shifted(k)
-        d1 = d1 + float(g1[k]) * (before - after)
-        d2 = d2 + float(g2[k]) * (before + after)
-    i = jnp.arange(n)
+    offsets = jnp.arange(-h, h + 1)
 
     def at(k):
-        hot = i[None, :] == k[:, None]
-        t1 = jnp.sum(jnp.where(hot, d1, 0.0), axis=-1)
-        t2 = jnp.sum(jnp.where(hot, d2, 0.0), axis=-1)
+        # s'(k) = Σ_o y(k − o) g'(o) = Σ_{o>0} g'(o) (y(k − o) − y(k + o)); s'' alike, even.
+        idx = k[:, None] + offsets
+        inside = (idx >= 0) & (idx < n)
+        y = jnp.where(inside, jnp.take_along_axis(Y, jnp.clip(idx, 0, n - 1), axis=-1), 0.0)
+        t1 = jnp.zeros_like(y[:, h])
+        t2 = float(g2[0]) * y[:, h]
+        for j in range(1, h + 1):
+            before, after = y[:, h - j], y[:, h + j]
+            t1 = t1 + float(g1[j]) * (before - after)
+            t2 = t2 + float(g2[j]) * (before + after)
         return -t1 / jnp.where(t2 < 0, t2, -1.0), t2
 
-    k = jnp.argmax(Y, axis=-1)
+    k = first_argmax(Y)
     t, _ = at(k)
     k = jnp.clip(k + jnp.clip(jnp.round(t), -h, h).astype(k.dtype), 0, n - 1)
     t, t2 = at(k)
     return k.astype(Y.dtype) + t, (t2 < 0) & (jnp.abs(t) <= 0.6)
+
+
+def first_argmax(Y: Float[Array, "s k"]):
+    """`jnp.argmax` along the last axis (the first maximum) as two plain reductions.
+
+    XLA's CPU backend runs argmax as a variadic (value, index) reduction that it does not
+    vectorise; the maximum, then the smallest index that attains it, are two simple ones.
+    Rows holding NaN: the last index (argmax: the NaN's; the ridge is not ok either way).
+    """
+    n = Y.shape[-1]
+    top = jnp.max(Y, axis=-1, keepdims=True)
+    i = jnp.min(jnp.where(Y == top, jnp.arange(n), n), axis=-1)
+    return jnp.minimum(i, n - 1)
 
 
 #: Segments (evenly spaced) whose ridge displacement `ridge_delay` takes the median of.
