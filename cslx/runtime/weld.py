@@ -189,8 +189,11 @@ def _wls(A, b, w, eps, dot=False):
     and a loop holding a library call is not compiled as one function
     (`cslx.environment.small_loops`): the circle's robust refit and both cap fits ran as
     ≈ 30 tasks a trip. With the sums, weld features and profile clean-up 1.455 → 1.342 ms
-    (p10 0.865 → 0.810; 600 interleaved calls, load 9). Values to float32 rounding (the
-    tracking outputs within 1.4e-4). ``dot``: the matrix products
+    (p10 0.865 → 0.810; 600 interleaved calls, load 9). Values to float32 rounding (video
+    seed 0: outputs within 1.4e-4); the 48 dev T approaches (7301, 7302, 7305, 1201–1203):
+    the rounding moved a few ill-posed flank-sunny frames' bead up to 0.92 mm, the filtered
+    offset ≤ 0.035 mm, each run's scores equal (offset mean ±0.005 mm; max, heading, T).
+    ``dot``: the matrix products
     (the centre's third coordinate, once per stripe: that 3 × 3 system is nearly singular,
     and its float32 rounding moved x_r by 2e-4 mm and the tracker's offset by 1.6e-4 mm).
     """
