@@ -169,10 +169,15 @@ def one_function(f: Callable[..., Any], x: Array, *args) -> Any:
     The loop's condition is one it cannot fold (an entry of the float array ``x`` is finite
     or is not), so the loop is kept; the values are those of ``f(x, *args)`` bit for bit
     (tests/runtime/test_small_ops.py). A while loop has no reverse-mode derivative: callers
-    that differentiate call ``f`` itself. Used on the followed bead's fit
+    that differentiate call ``f`` itself. Used on the clipped-core fill
+    (`cslx.runtime.band_input._fill`) and the followed bead's fit
     (`cslx.runtime.weld.stripe_feature`, ≈ 180 fused operations; issue 13): the horizontal
     stripe's feature 0.397 → 0.361 ms median, p10 0.343 → 0.314 (1000 interleaved calls on
-    12 tracking frames of the sunny video, seed 0, load 4.5).
+    12 tracking frames of the sunny video, seed 0, load 4.5). Not kept: the profile
+    clean-ups and the clip weights of `cslx.runtime.pipeline._process` each as one function
+    (jitted alone 0.095 → 0.061 and 0.206 → 0.132 ms, but `Tracker.step` 3.18 → 3.17 ms, 400
+    interleaved frames, load 2.5–2.9, and the outputs moved by 1.7e-4: the loop boundary
+    keeps XLA from fusing the triangulation into the clean-up, and the rounding changes).
     """
     shapes = jax.eval_shape(f, x, *args)
     init = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)
