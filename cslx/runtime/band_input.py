@@ -52,6 +52,7 @@ from jax import lax
 from jaxtyping import Array, Float, UInt8
 
 from ..segmentation.clipped import DOME_MIN_RUN, MAX_RUN, clipped_mask, fill_clipped, white_mask
+from .small_ops import one_function
 
 __all__ = [
     "band_image",
@@ -91,23 +92,35 @@ def _fill(rgb, I, clip, weights, axis: int, dome: tuple, margin: int = 0):
     `cslx.runtime.pipeline._dome` builds it: runs longer than min run (`DOME_MIN_RUN` when
     0) with at most that share of odd pixels (white, `white_mask`, when ``colour``; no
     clipped pixel ``along`` px to either side across ``axis`` when ``along`` > 0) are domed
-    to 1 + height at their middle (issue 12; opt-in)."""
+    to 1 + height at their middle (issue 12; opt-in).
+
+    The fill runs as one function (`cslx.runtime.small_ops.one_function`: its scan, the
+    stacking of its inputs and outputs and the flank levels without a task each), the same
+    values bit for bit: tracking bands with the tracker's domed fill, rows 0.632 → 0.504 ms,
+    columns 0.749 → 0.607 ms median (300 interleaved calls on 12 frames of the sunny video,
+    seed 0, load 2–4; issue 13)."""
     height = float(dome[axis]) if dome else 0.0
     if height <= 0:
-        return fill_clipped(I, clip, axis=axis, margin=margin)[0]
+        return one_function(
+            lambda I, clip: fill_clipped(I, clip, axis=axis, margin=margin)[0], I, clip
+        )
     _, _, share, min_run, colour, along = dome
     white = white_mask(rgb, weights) if colour else None
-    return fill_clipped(
-        I,
-        clip,
-        axis=axis,
-        white=white,
-        dome=height,
-        dome_min_run=int(min_run) or DOME_MIN_RUN,
-        dome_white_share=float(share),
-        dome_along=int(along),
-        margin=margin,
-    )[0]
+
+    def domed(I, clip, white):
+        return fill_clipped(
+            I,
+            clip,
+            axis=axis,
+            white=white,
+            dome=height,
+            dome_min_run=int(min_run) or DOME_MIN_RUN,
+            dome_white_share=float(share),
+            dome_along=int(along),
+            margin=margin,
+        )[0]
+
+    return one_function(domed, I, clip, white)
 
 
 def band_image(

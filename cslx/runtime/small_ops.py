@@ -13,15 +13,17 @@ load 7–9; outputs within 7e-5), so the loops' step count is not what they cost
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
+import jax
 import jax.numpy as jnp
 from jax import lax
 
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
     from jaxtyping import Array, Bool, Float
 
-__all__ = ["masked_median", "solve_spd", "window_nanmedian"]
+__all__ = ["masked_median", "one_function", "solve_spd", "window_nanmedian"]
 
 
 def solve_spd(M: Float[Array, "n n"], v: Float[Array, " n"]) -> Float[Array, " n"]:
@@ -154,3 +156,35 @@ def window_nanmedian(z: Float[Array, " n"], k: int) -> Float[Array, " n"]:
     lo = sum(jnp.where(lo_i == i, v[i], 0.0) for i in range(m))
     hi = sum(jnp.where(hi_i == i, v[i], 0.0) for i in range(m))
     return jnp.where(count > 0, 0.5 * lo + 0.5 * hi, jnp.nan).astype(z.dtype)
+
+
+def one_function(f: Callable[..., Any], x: Array, *args) -> Any:
+    """``f(x, *args)``, run inside a while loop of one trip so that XLA's CPU backend compiles
+    it as one function (with `cslx.environment.small_loops`, the default of ``configure``).
+
+    The CPU backend launches each fused operation of a program as its own task (≈ 0.7 µs of
+    dispatch each in a `jax.profiler` trace), but compiles a while loop without a library
+    call into a single function (XLA's small while-loop hoisting: no custom call; in jaxlib
+    0.10 no scatter, sort or matrix product either, else the loop stays a loop of tasks).
+    The loop's condition is one it cannot fold (an entry of the float array ``x`` is finite
+    or is not), so the loop is kept; the values are those of ``f(x, *args)`` bit for bit
+    (tests/runtime/test_small_ops.py). A while loop has no reverse-mode derivative: callers
+    that differentiate call ``f`` itself. Used on the clipped-core fill
+    (`cslx.runtime.band_input._fill`) and the followed bead's fit
+    (`cslx.runtime.weld.stripe_feature`, ≈ 180 fused operations; issue 13): the horizontal
+    stripe's feature 0.397 → 0.361 ms median, p10 0.343 → 0.314 (1000 interleaved calls on
+    12 tracking frames of the sunny video, seed 0, load 4.5). Not kept: the profile
+    clean-ups and the clip weights of `cslx.runtime.pipeline._process` each as one function
+    (jitted alone 0.095 → 0.061 and 0.206 → 0.132 ms, but `Tracker.step` 3.18 → 3.17 ms, 400
+    interleaved frames, load 2.5–2.9, and the outputs moved by 1.7e-4: the loop boundary
+    keeps XLA from fusing the triangulation into the clean-up, and the rounding changes).
+    """
+    shapes = jax.eval_shape(f, x, *args)
+    init = jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes)
+    probe = jnp.ravel(x)[0]
+    go = jnp.isfinite(probe) | ~jnp.isfinite(probe)  # True, unknown to XLA
+
+    def body(carry):
+        return jnp.zeros((), bool), f(x, *args)
+
+    return lax.while_loop(lambda carry: carry[0], body, (go, init))[1]

@@ -47,13 +47,14 @@ only |θ| is seen) or uninformative (bare plate).
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from ..pytree import pytree_dataclass, static
-from .small_ops import masked_median, solve_spd
+from .small_ops import masked_median, one_function, solve_spd
 from .vertical_heading import heading_from_vertical
 
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
@@ -178,12 +179,21 @@ def _wls(A, b, w, eps, dot=False):
     """(AᵀWA + eps I)⁻¹ AᵀW b for tiny systems; no sqrt(w), so zero weights keep finite
     gradients.
 
-    The normal equations' n(n + 1)/2 + n sums Σ w aᵢ aⱼ, Σ w aᵢ b are one reduction over
-    the stacked products rather than two matrix products (`AᵀW A`, `AᵀW b`): XLA's CPU
-    backend ran those as library dot calls on (n, N) operands, and the cap model's (3, 640)
-    weighted Jacobian as a kernel split over two threads, which waits for the other thread
-    on the shared CPU (issue 13; weld features 1.110 → 1.045 ms, 600 interleaved calls on
-    12 tracking frames, load 5.6). Values to float32 rounding. ``dot``: the matrix products
+    The normal equations' n(n + 1)/2 + n sums Σ w aᵢ aⱼ, Σ w aᵢ b are reductions of the
+    products rather than two matrix products (`AᵀW A`, `AᵀW b`): XLA's CPU backend ran
+    those as library dot calls on (n, N) operands, and the cap model's (3, 640) weighted
+    Jacobian as a kernel split over two threads, which waits for the other thread on the
+    shared CPU (issue 13; weld features 1.110 → 1.045 ms, 600 interleaved calls on 12
+    tracking frames, load 5.6). One sum per product, not one reduction of their (k, N)
+    stack: jaxlib 0.10 hands that stack to its YNNPACK library (a 9 × 640 reduce for n = 3),
+    and a loop holding a library call is not compiled as one function
+    (`cslx.environment.small_loops`): the circle's robust refit and both cap fits ran as
+    ≈ 30 tasks a trip. With the sums, weld features and profile clean-up 1.455 → 1.342 ms
+    (p10 0.865 → 0.810; 600 interleaved calls, load 9). Values to float32 rounding (video
+    seed 0: outputs within 1.4e-4); the 48 dev T approaches (7301, 7302, 7305, 1201–1203):
+    the rounding moved a few ill-posed flank-sunny frames' bead up to 0.92 mm, the filtered
+    offset ≤ 0.035 mm, each run's scores equal (offset mean ±0.005 mm; max, heading, T).
+    ``dot``: the matrix products
     (the centre's third coordinate, once per stripe: that 3 × 3 system is nearly singular,
     and its float32 rounding moved x_r by 2e-4 mm and the tracker's offset by 1.6e-4 mm).
     """
@@ -194,7 +204,7 @@ def _wls(A, b, w, eps, dot=False):
     cols = [A[:, i] for i in range(n)]
     wc = [w * c for c in cols]
     terms = [wc[i] * cols[j] for i in range(n) for j in range(i, n)] + [c * b for c in wc]
-    S = jnp.sum(jnp.stack(terms), axis=1)
+    S = jnp.stack([jnp.sum(term) for term in terms])
     M = [[None] * n for _ in range(n)]
     k = 0
     for i in range(n):
@@ -339,12 +349,37 @@ def _side_cover(t, valid, weights, t_c, p_cap, half0, config: WeldConfig):
     return jnp.where(hi > 0, lo / jnp.maximum(hi, 1e-6), 0.0) ** config.side_cover_power
 
 
+def _largest_run(h, above, below):
+    """(mask, area Σh) of the run of ``above`` points bounded by ``below`` points on both sides
+    (step 3 of the module docstring) with the largest area, the first of equal ones; where
+    none has an area > 0, the points above before the first point below (area 0).
+
+    The area of each point's run is C(next point below) − C(last point below) of the
+    cumulative area C, rather than a `segment_sum` over the runs, whose scatter keeps
+    `one_function` from compiling the bead's fit as one function (issue 13): the same run
+    as segment_sum's argmax, its area to float rounding (tests/runtime/test_weld.py).
+    """
+    n = h.shape[0]
+    idx = jnp.arange(n)
+    seg = jnp.cumsum(below.astype(jnp.int32))  # runs (and their plate point) by number
+    inside = above & (seg >= 1) & (seg < seg[-1])
+    C = jnp.cumsum(jnp.where(inside, h, 0.0))
+    last = jax.lax.cummax(jnp.where(below, idx, 0))
+    after = jax.lax.cummin(jnp.where(below, idx, n - 1), reverse=True)
+    area = jnp.where(inside, C[after] - C[last], 0.0)
+    top = jnp.argmax(area)
+    best = jnp.where(area[top] > 0, seg[top], 0)
+    return above & (seg == best), area[top]
+
+
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
     axis: int,
     config: WeldConfig = WeldConfig(),
     weights: Float[Array, " n"] | None = None,
+    *,
+    one_call: bool = False,
 ) -> WeldFeature:
     """The weld bead crossed by one stripe (module docstring: plate, height, run, cap).
 
@@ -358,6 +393,8 @@ def stripe_feature(
             model's fits (steps 4 and 5; None: all 1): the pipeline gives a centre that a
             clipped-core fill placed less weight (`PipelineConfig.clip_weight`); one < 0.5
             leaves the point out of the confidence's coverage count.
+        one_call: run steps 1–5 as one function (`cslx.runtime.small_ops.one_function`):
+            the same values; not reverse-differentiable (a while loop), so off by default.
     Returns:
         WeldFeature; jit/vmap-able, differentiable in `points` for a fixed bead run.
     """
@@ -366,14 +403,26 @@ def stripe_feature(
             f"axis must be 0 (x_r, vertical stripe) or 1 (y_r, horizontal), got {axis}"
         )
     points, valid = _check_profile(points, valid, "stripe_feature")
-    dtype = points.dtype
-    n = points.shape[0]
     P = jnp.where(valid[:, None], points, 0.0)
+    w0 = valid.astype(P.dtype)
+    s_raw, z = P[:, axis], P[:, 2]
+    s_mean = jnp.sum(w0 * s_raw) / jnp.maximum(jnp.sum(w0), 1.0)
+    s = jnp.where(valid, s_raw - s_mean, 0.0)
+    # The centre's third coordinate comes from a linear fit q(s, z) over all valid points
+    # (exact for points on one laser plane); its matrix products are a library call, which
+    # would keep `one_function` from compiling the rest as one function.
+    q = _wls(jnp.stack([jnp.ones_like(s), s, z], -1), P[:, 1 - axis], w0, 1e-6, dot=True)
+    bead = functools.partial(_bead, valid=valid, axis=axis, config=config, weights=weights)
+    return one_function(bead, P, s, s_mean, q) if one_call else bead(P, s, s_mean, q)
+
+
+def _bead(P, s, s_mean, q, *, valid, axis, config: WeldConfig, weights) -> WeldFeature:
+    """Steps 1–5 of the module docstring on a profile prepared by `stripe_feature`."""
+    dtype = P.dtype
+    n = P.shape[0]
     w0 = valid.astype(dtype)
     n_valid = jnp.sum(w0)
-    s_raw, z = P[:, axis], P[:, 2]
-    s_mean = jnp.sum(w0 * s_raw) / jnp.maximum(n_valid, 1.0)
-    s = jnp.where(valid, s_raw - s_mean, 0.0)
+    z = P[:, 2]
 
     # 1. plate, 2. plate-aligned coordinates (t along, h normal)
     (c0, c1), sigma = plate_fit(s, z, valid, config)
@@ -384,12 +433,7 @@ def stripe_feature(
     # 3. runs above the threshold, delimited by valid plate points
     above = valid & (h > config.threshold_mm)
     below = valid & ~above
-    seg = jnp.cumsum(below.astype(jnp.int32))
-    n_below = seg[-1]
-    bounded = (seg >= 1) & (seg < n_below)
-    area = jax.ops.segment_sum(jnp.where(above & bounded, h, 0.0), seg, num_segments=n + 1)
-    best = jnp.argmax(area)
-    run = above & (seg == best)
+    run, run_area = _largest_run(h, above, below)
     n_run = jnp.sum(run.astype(dtype))
 
     # 4. circular cap, refitted with Tukey weights on its geometric residuals: the cap that
@@ -459,13 +503,12 @@ def stripe_feature(
     s_c = (a - c1 * height) / norm
     z_c = c0 + (c1 * a + height) / norm
     other = 1 - axis
-    q = _wls(jnp.stack([jnp.ones_like(s), s, z], -1), P[:, other], w0, 1e-6, dot=True)
     q_c = q[0] + q[1] * s_c + q[2] * z_c
     pos = s_c + s_mean
     centre = jnp.zeros(3, dtype).at[axis].set(pos).at[other].set(q_c).at[2].set(z_c)
 
     found = (
-        (area[best] > 0)
+        (run_area > 0)
         & (n_run >= config.min_points)
         & convex
         & (height >= config.min_height_mm)
@@ -514,7 +557,7 @@ def weld_features(
     """
     from .junction import crossing_feature
 
-    fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config, weights_h)
+    fh = stripe_feature(profile_h, valid_h, HORIZONTAL_AXIS, config, weights_h, one_call=True)
     # where the stripes cross, the vertical stripe's centres are pulled by the horizontal
     # one: in rendered sunlight every stray junction report lay within 10 mm of it
     x_h = masked_median(profile_h[:, VERTICAL_AXIS], valid_h)  # = nanmedian, no sort

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cslx.runtime.small_ops import masked_median, solve_spd, window_nanmedian
+from cslx.runtime.small_ops import masked_median, one_function, solve_spd, window_nanmedian
 
 
 def test_masked_median_equals_nanmedian():
@@ -111,3 +111,27 @@ def test_window_nanmedian_equals_sorted_windows():
         got = np.asarray(f(z, k))
         assert got.dtype == ref.dtype
         np.testing.assert_array_equal(got, ref, err_msg=f"trial {t}, k={k}")
+
+
+def test_one_function_equals_the_call():
+    """A pytree of results of a function with loops and reductions, bit for bit, also for
+    a NaN in the probed entry and under vmap (the loop's condition is then batched)."""
+
+    def f(x, w):
+        c = jax.lax.fori_loop(0, 5, lambda i, c: c + jnp.sum(w * jnp.cos(x * c)), 0.5)
+        return {"c": c, "m": masked_median(x, w > 0.5), "y": jnp.cumsum(x * w)[::7]}
+
+    rng = np.random.default_rng(8)
+    run, ref = jax.jit(lambda x, w: one_function(f, x, w)), jax.jit(f)
+    for k in range(6):
+        x = rng.standard_normal(300).astype(np.float32)
+        if k == 1:
+            x[0] = np.nan
+        w = rng.random(300).astype(np.float32)
+        for a, b in zip(jax.tree.leaves(run(x, w)), jax.tree.leaves(ref(x, w)), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    X, W = rng.standard_normal((3, 50)).astype(np.float32), rng.random((3, 50)).astype(np.float32)
+    got = jax.vmap(lambda x, w: one_function(f, x, w))(X, W)
+    want = jax.vmap(f)(X, W)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

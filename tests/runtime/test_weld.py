@@ -136,6 +136,47 @@ def test_two_beads_picks_more_prominent():
     assert abs(float(f.position) + 20.0) < 0.3
 
 
+def test_largest_run_equals_segment_sum():
+    """The run picked from the cumulative area is segment_sum's argmax (first of equal
+    areas; the points above before the first plate point where no bounded run has area),
+    on random height profiles with dropouts, ties and runs touching the ends."""
+    from cslx.runtime.weld import _largest_run
+
+    def reference(h, above, below):
+        seg = jnp.cumsum(below.astype(jnp.int32))
+        bounded = (seg >= 1) & (seg < seg[-1])
+        w = jnp.where(above & bounded, h, 0.0)
+        area = jax.ops.segment_sum(w, seg, num_segments=h.shape[0] + 1)
+        best = jnp.argmax(area)
+        return above & (seg == best), area[best]
+
+    rng = np.random.default_rng(9)
+    ours, ref = jax.jit(_largest_run), jax.jit(reference)
+    for k in range(200):
+        n = 64
+        h = rng.random(n).astype(np.float32) * 2.0
+        if k % 3 == 0:
+            h = np.round(h, 0)  # equal run areas
+        valid = rng.random(n) > (0.1 if k % 2 else 0.5)
+        above = valid & (h > 0.6 if k % 5 else h > 3.0)  # k % 5 == 0: no run at all
+        below = valid & ~above
+        args = jnp.asarray(h), jnp.asarray(above), jnp.asarray(below)
+        (run, area), (run_ref, area_ref) = ours(*args), ref(*args)
+        np.testing.assert_array_equal(np.asarray(run), np.asarray(run_ref))
+        np.testing.assert_allclose(float(area), float(area_ref), rtol=1e-5, atol=1e-6)
+
+
+def test_one_call_is_the_same_feature():
+    """`stripe_feature(..., one_call=True)` (one compiled function) equals the plain call."""
+    rng = np.random.default_rng(10)
+    pts, valid, _ = horizontal_profile(rng, 3.0, 14.0, 2.0, glint=True)
+    w = jnp.asarray(np.where(rng.random(len(valid)) < 0.1, 0.1, 1.0), jnp.float32)
+    args = jnp.asarray(pts, jnp.float32), jnp.asarray(valid)
+    one = jax.jit(lambda p, v: stripe_feature(p, v, 1, WeldConfig(), w, one_call=True))
+    for a, b in zip(one(*args), feature(*args, 1, WeldConfig(), w), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
 def test_plate_fit_matches_least_squares_on_plate_points():
     """With the bead removed by hand, the robust fit equals ordinary least squares."""
     rng = np.random.default_rng(6)
