@@ -290,7 +290,7 @@ def _run(args, log) -> int:
 
 
 def _run_collected(args, log) -> int:
-    from ..runtime import PathController, RobotLink
+    from ..runtime import ControllerConfig, PathController, RobotLink
     from ..runtime.loop import TrackingLoop, TrackLog
     from ..sensor import CalibrationError, load_sensor
 
@@ -319,7 +319,9 @@ def _run_collected(args, log) -> int:
         tracker = _compile(sensor, log)
         gc.freeze()
         gc.enable()
-        return _loop(args, source, tracker, link, PathController(), TrackingLoop, TrackLog)
+        # the turn at a T ends on the offset observed at the tracker's x_ref (`lookahead_mm`)
+        ctrl = PathController(ControllerConfig(lookahead_mm=tracker.x_ref))
+        return _loop(args, source, tracker, link, ctrl, TrackingLoop, TrackLog)
     finally:
         source.close()
         if link is not None:

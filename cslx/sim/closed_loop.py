@@ -143,7 +143,7 @@ def run_closed_loop(
     if tracker is None:
         tracker = Tracker.from_calibration(sensor, log=log or (lambda s: None))
     tracker.reset()
-    controller = PathController(ControllerConfig(turn_rate=turn_rate))
+    controller = PathController(ControllerConfig(turn_rate=turn_rate, lookahead_mm=tracker.x_ref))
     start = (-start_before_mm, start_offset_mm, math.radians(start_heading_deg))
     cfg = SimulatorConfig(realtime=False, command_timeout_s=1e6, seed=seed)
     dt = 1.0 / fps

@@ -474,3 +474,28 @@ def test_measured_travel_corrects_the_dead_reckoned_junction():
         stops[measured] = travelled - x_j
     assert stops[False] > 0.3, stops  # the lag: past the T on the commanded dead-reckoning
     assert abs(stops[True]) <= 0.2, stops  # what moves after the last command only
+
+
+@pytest.mark.parametrize("finish_deg", [0.0, 3.0])
+@pytest.mark.parametrize("bias_deg", [-1.2, 1.2])
+def test_turn_lands_the_lookahead_point_on_the_crossing_weld(finish_deg, bias_deg):
+    """Issue 12: the turn at a T is 90° plus the followed weld's heading *estimate*; one
+    1.2° off leaves the look-ahead point 150 mm · tan 1.2° ≈ 3.1 mm off the crossing weld
+    where the turn ends (odometry alone, `turn_finish_deg` = 0). Ending it on the crossing
+    weld's observed offset (`PathController._finish_on_weld`) lands it within 0.3 mm."""
+    ctrl = PathController(ControllerConfig(turn_rate=0.5, turn_finish_deg=finish_deg))
+    pose, dt, landed = (0.0, 0.0, 0.0), 0.05, None
+    for _ in range(1200):
+        obs = observe(pose, T_JUNCTION)
+        if ctrl.state is not State.TURN:
+            obs["heading_deg"] += bias_deg  # the followed weld's heading, estimated off
+        cmd = ctrl.update(dt, **obs, robot_heading_rad=pose[2], sensor_ok=True)
+        pose = integrate(pose, cmd.v_mm_s, cmd.omega_rad_s, dt)
+        if ctrl.turns_completed:
+            landed = observe(pose, T_JUNCTION)["offset_mm"]
+            break
+    assert landed is not None
+    if finish_deg > 0:
+        assert abs(landed) <= 0.3, landed
+    else:
+        assert abs(landed) == pytest.approx(150.0 * math.tan(math.radians(1.2)), abs=0.5)
