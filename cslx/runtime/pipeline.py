@@ -158,18 +158,6 @@ def _stripe(
     ``stride`` > 1: the filter is found on every stride-th segment and applied to all.
     ``lag``: the output of W0 and one step from it for the next frame (`med`'s ``lag``).
     """
-    # In a band, Steger's noise floor is scaled to the frame's (`band_snr_scale`).
-    snr = config.snr * (band_snr_scale(I.shape[axis], size) if size else 1.0)
-
-    def steger(B, half=False):
-        return steger_centres(
-            B, sigma=config.sigma, axis=axis, threshold=config.threshold, snr=snr, half_sample=half
-        )
-
-    # A linear-phase filter of even length on the segments themselves: its output is read
-    # half a sample late, as a slice of the convolution, and Steger's derivatives are taken
-    # between its samples (`med`'s ``half_lag``): no Fourier shift.
-    half = symmetric and stride == 1 and L % 2 == 0
     if use_med:
         sub = I if stride == 1 else (I[:, ::stride] if axis == 0 else I[::stride])
         r = med(
@@ -183,7 +171,6 @@ def _stripe(
             ridge_sigma=config.sigma,
             symmetric=symmetric,
             lag=lag,
-            half_lag=half,
         )
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
@@ -197,14 +184,14 @@ def _stripe(
             # the delay measured on the strided segments (`med_output`: one FFT pass pair)
             return med_output(I, r.filter, r.delay, axis=axis)
 
+        B = lax.cond(ok, out, lambda: I)  # not a select (band_input's notes)
         steps, kurt = r.steps.astype(jnp.int32), jnp.where(ok, r.kurtosis, jnp.nan)
-        if half:
-            c = lax.cond(ok, lambda: steger(r.output, True), lambda: steger(I))
-        else:
-            c = steger(lax.cond(ok, out, lambda: I))  # not a select (band_input's notes)
-        return c, W, steps, kurt
-    W, steps, kurt = W0, jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan, I.dtype)
-    return steger(I), W, steps, kurt
+    else:
+        W, B, steps, kurt = W0, I, jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan, I.dtype)
+    # In a band, Steger's noise floor is scaled to the frame's (`band_snr_scale`).
+    snr = config.snr * (band_snr_scale(I.shape[axis], size) if size else 1.0)
+    c = steger_centres(B, sigma=config.sigma, axis=axis, threshold=config.threshold, snr=snr)
+    return c, W, steps, kurt
 
 
 def _shift(c: Centres, offset) -> Centres:

@@ -281,11 +281,10 @@ def _med(
     ridge_sigma,
     symmetric=False,
     lag=False,
-    half_lag=False,
 ):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
     if lag:
-        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, half_lag)
+        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric)
 
     def step(y, args):
         # y = (filter, Σ_j k_j of the previous filter): the solver's error on the second
@@ -311,7 +310,7 @@ def _med(
     st = _f.stats(W, pb)
     delay, sign = _delay(W, st, pb, delay_kind, ridge_sigma)
     W = W * sign
-    if delay_kind == "centre" and (L % 2 or half_lag):
+    if delay_kind == "centre" and L % 2:
         out = _f.centre_output(st, sign, pb)  # a whole-sample delay: a slice, no FFT
     elif delay_kind == "centre":
         out = _f.shifted_output(W, (L - 1) / 2, pb)  # a static delay: a constant phase
@@ -335,7 +334,6 @@ def med(
     ridge_sigma: float = 2.0,
     symmetric: bool = False,
     lag: bool = False,
-    half_lag: bool = False,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -368,11 +366,6 @@ def med(
             the next frame (`_lagged`; ``max_steps`` and ``tol`` unused, ``steps`` 1,
             ``converged`` False, ``kurtosis`` at ``init``): one inverse-FFT pass (the
             statistics at the new filter) fewer than ``max_steps=1``.
-        half_lag: with ``delay="centre"`` and an even L, whose delay (L − 1)/2 falls
-            between two samples, ``output`` is B(i + (L − 2)/2): sample i holds the
-            delay-compensated output at i − ½ (a slice of B, no Fourier shift; Steger reads
-            it with ``half_sample``, `cslx.segmentation.steger.steger_centres`). Without
-            effect otherwise.
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -384,11 +377,10 @@ def med(
     loading = _default_loading(I.dtype) if loading is None else float(loading)
     delay = _check_delay(delay, symmetric)
     args = (int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma))
-    half = bool(half_lag) and delay == "centre" and L % 2 == 0
-    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag), half)
+    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag))
 
 
-def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, half_lag=False):
+def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric):
     """`med`'s ``lag``: the output of the warm-start filter W0, and one step from it.
 
     One fixed-point step W1 = update(W0) needs the output statistics at W0 (`med_fft.update`
@@ -400,7 +392,7 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, half_lag=
     """
     W1, st = _f.update(W0, pb, loading, symmetric)
     delay, sign = _delay(W0, st, pb, delay_kind, ridge_sigma)
-    if delay_kind == "centre" and (pb.L % 2 or half_lag):
+    if delay_kind == "centre" and pb.L % 2:
         out = _f.centre_output(st, sign, pb)
     elif delay_kind == "centre":
         out = _f.shifted_output(W0 * sign, (pb.L - 1) / 2, pb)

@@ -367,10 +367,11 @@ def centre_output(st: Stats, sign, pb: Problem) -> Float[Array, "s m"]:
     convolution B = W ∗ X that `stats` already computed for the filter (n ≥ m + L − 1: no
     wrap-around). ``st.ba``/``st.bb`` are B less its segment means, which are zero because
     the tapered segments X sum to zero (`centre_and_taper`); ``sign`` is the filter's
-    sign (`centre_sign`). Equal to `shifted_output` up to float rounding. For an even L the
-    slice starts at (L − 2)/2: sample i holds the output at i − ½ (`med`'s ``half_lag``).
+    sign (`centre_sign`). Equal to `shifted_output` up to float rounding.
     """
-    d = (pb.L - 1) // 2  # even L: (L − 2)/2, the output half a sample late (`med`'s half_lag)
+    if pb.L % 2 == 0:
+        raise ValueError(f"the delay of an even-length filter (L = {pb.L}) is not a whole sample")
+    d = (pb.L - 1) // 2
     B = jnp.stack([st.ba, st.bb], axis=1).reshape(-1, st.ba.shape[-1])
     return sign * B[: pb.s, d : d + pb.m]
 

@@ -108,19 +108,16 @@ def sigma_for_width(width: float) -> float:
     return max(width / (2.0 * math.sqrt(3.0)), 0.7)
 
 
-def _taps(sigma: float, order: int, half: bool = False) -> np.ndarray:
-    """Gaussian (derivative) kernel g(x), x = 0..r, exactly as scipy.ndimage builds it;
-    ``half``: g(x + ½), x = 0..r (sampled between the pixels, normalised alike)."""
+def _taps(sigma: float, order: int) -> np.ndarray:
+    """Gaussian (derivative) kernel g(x), x = 0..r, exactly as scipy.ndimage builds it."""
     if not sigma > 0:
         raise ValueError(f"sigma must be positive, got {sigma!r}")
     r = int(TRUNCATE * sigma + 0.5)
     x = np.arange(-r, r + 1, dtype=np.float64)
-    if half:
-        x = np.arange(-r - 1, r + 1, dtype=np.float64) + 0.5
     phi = np.exp(-0.5 * x**2 / sigma**2)
     phi /= phi.sum()
     poly = {0: np.ones_like(x), 1: -x / sigma**2, 2: x**2 / sigma**4 - 1 / sigma**2}[order]
-    return (poly * phi)[r + int(half) :]
+    return (poly * phi)[r:]
 
 
 def _filter_axis(x: Array, sigma: float, orders: tuple[int, ...], axis: int) -> list[Array]:
@@ -140,38 +137,24 @@ def _radius(sigma: float) -> int:
     return len(_taps(sigma, 0)) - 1
 
 
-def _filter_padded(
-    xp: Array, sigma: float, orders: tuple[int, ...], axis: int, half: bool = False
-) -> list[Array]:
+def _filter_padded(xp: Array, sigma: float, orders: tuple[int, ...], axis: int) -> list[Array]:
     """`_filter_axis` of an array already padded by the kernel radius r on both ends of
-    ``axis`` (the output is 2r shorter there: the valid part).
-
-    ``half``: the samples along ``axis`` lie half a pixel late (x[i] holds the signal at
-    i − ½; padded by r before and r + 1 after): out[i] = Σ_k g(k + ½) x[i − k], the
-    derivatives at the pixel centres i, folded as g(k + ½)(x[i − k] ± x[i + 1 + k]).
-    """
-    taps = {o: _taps(sigma, o, half) for o in orders}
+    ``axis`` (the output is 2r shorter there: the valid part)."""
+    taps = {o: _taps(sigma, o) for o in orders}
     r = len(taps[orders[0]]) - 1
-    n = xp.shape[axis] - 2 * r - int(half)
+    n = xp.shape[axis] - 2 * r
 
     def shifted(k: int) -> Array:
         return lax.slice_in_dim(xp, r + k, r + k + n, axis=axis)
 
     centre = shifted(0)
-    if half:  # the k = 0 pair: x[i] and x[i + 1]
-        nxt = shifted(1)
-        out = {
-            o: float(taps[o][0]) * (centre + nxt if o % 2 == 0 else centre - nxt) for o in orders
-        }
-    else:
-        out = {
-            o: (centre * float(taps[o][0]) if o % 2 == 0 else jnp.zeros_like(centre))
-            for o in orders
-        }
+    out = {
+        o: (centre * float(taps[o][0]) if o % 2 == 0 else jnp.zeros_like(centre)) for o in orders
+    }
     even = [o for o in orders if o % 2 == 0]
     odd = [o for o in orders if o % 2 == 1]
     for k in range(1, r + 1):
-        before, after = shifted(-k), shifted(k + int(half))
+        before, after = shifted(-k), shifted(k)
         if even:
             s = before + after
             for o in even:
@@ -205,22 +188,18 @@ class _Ridge(NamedTuple):
     geometric: Array  # λ < 0 and the Taylor extremum lies inside the pixel
 
 
-def _ridge(image: Array, sigma: float, max_offset, half_axis: int | None = None) -> _Ridge:
-    """Per-pixel Hessian eigen-decomposition and Steger offset, closed form and grad-safe.
-
-    ``half_axis``: the image's samples along that axis lie half a pixel late (`steger_centres`'s
-    ``half_sample``); the derivatives are taken at the pixel centres (`_filter_padded`)."""
+def _ridge(image: Array, sigma: float, max_offset) -> _Ridge:
+    """Per-pixel Hessian eigen-decomposition and Steger offset, closed form and grad-safe."""
     # The image is padded once in both axes: filtering the reflected columns down axis 0
     # gives the reflected columns of the filtered image, so the second pass needs no padding
     # of its three inputs (the same values bit for bit; issue 13: the six concatenations
     # of the second pass's reflect padding cost the 480×128 band of columns ≈ 0.3 ms).
     r = _radius(sigma)
-    h0, h1 = half_axis == 0, half_axis == 1
-    xp = jnp.pad(image, ((r, r + h0), (r, r + h1)), mode="symmetric")
-    a0, a1, a2 = _filter_padded(xp, sigma, (0, 1, 2), 0, h0)
-    ru, ruu = _filter_padded(a0, sigma, (1, 2), 1, h1)
-    rv, ruv = _filter_padded(a1, sigma, (0, 1), 1, h1)
-    (rvv,) = _filter_padded(a2, sigma, (0,), 1, h1)
+    xp = jnp.pad(image, r, mode="symmetric")
+    a0, a1, a2 = _filter_padded(xp, sigma, (0, 1, 2), 0)
+    ru, ruu = _filter_padded(a0, sigma, (1, 2), 1)
+    rv, ruv = _filter_padded(a1, sigma, (0, 1), 1)
+    (rvv,) = _filter_padded(a2, sigma, (0,), 1)
 
     half_diff = 0.5 * (rvv - ruu)
     q = half_diff**2 + ruv**2
@@ -288,11 +267,9 @@ def _check_image(image) -> Array:
     return image
 
 
-@functools.partial(jax.jit, static_argnames=("sigma", "axis", "max_angle_deg", "half_sample"))
-def _steger_centres(
-    image, threshold, min_strength, snr, max_offset, *, sigma, axis, max_angle_deg, half_sample
-):
-    ridge = _ridge(image, sigma, max_offset, axis if half_sample else None)
+@functools.partial(jax.jit, static_argnames=("sigma", "axis", "max_angle_deg"))
+def _steger_centres(image, threshold, min_strength, snr, max_offset, *, sigma, axis, max_angle_deg):
+    ridge = _ridge(image, sigma, max_offset)
     min_cos = math.cos(math.radians(max_angle_deg))
     strongest = _strongest(ridge, min_cos, (axis,))
     return _select(ridge, axis, threshold, min_strength, snr, min_cos, strongest)
@@ -308,7 +285,6 @@ def steger_centres(
     snr: float = 5.0,
     max_offset: float = 0.6,
     max_angle_deg: float = 60.0,
-    half_sample: bool = False,
 ) -> Centres:
     """Sub-pixel stripe centres by Steger's method, one per column (axis=0) or row (axis=1).
 
@@ -329,11 +305,6 @@ def steger_centres(
             border, which would otherwise be rejected by both neighbours and lose the column.
         max_angle_deg: largest angle between the stripe and the image axis it runs along
             (static); steeper ridge points (e.g. the other stripe of a cross) are ignored.
-        half_sample: the image's samples along ``axis`` lie half a pixel late (sample i
-            holds the image at i − ½, as `cslx.segmentation.med.med`'s ``half_lag`` output):
-            the Gaussian derivatives along ``axis`` are sampled at k + ½
-            (`_filter_padded`), so they and the centres are those of the image on its own
-            pixel grid, to the sampling error of the Gaussian (static).
 
     Returns:
         `Centres` (pos, valid, strength) of length W (axis=0) or H (axis=1).
@@ -350,7 +321,6 @@ def steger_centres(
         sigma=float(sigma),
         axis=axis,
         max_angle_deg=float(max_angle_deg),
-        half_sample=bool(half_sample),
     )
 
 

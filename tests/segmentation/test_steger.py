@@ -211,26 +211,3 @@ def test_hessian_from_one_2d_pad_equals_padding_each_pass(shape, sigma):
         for a, b in zip(jax.jit(old)(image), jax.jit(new)(image), strict=True):
             scale = float(jnp.max(jnp.abs(a)))
             np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-5, atol=1e-6 * scale)
-
-
-@pytest.mark.parametrize("axis", [0, 1])
-def test_half_sample_reads_an_image_sampled_half_a_pixel_late(axis):
-    """``half_sample`` (issue 13: the tracking bands' MED output, `med`'s ``half_lag``): the
-    image sampled at i − ½ along ``axis`` gives the centres of the image sampled at i, to the
-    Gaussian's sampling error, where reading it plainly is half a pixel off."""
-    cols = np.arange(W, dtype=float)
-    centre = 40.3 + 0.07 * cols + 1.5 * np.sin(cols / 17.0)
-
-    def image(shift):
-        v = np.arange(H, dtype=float)[:, None] - shift
-        out = 20.0 + 150.0 * gaussian(v, centre[None, :], 1.8)
-        return jnp.asarray(out if axis == 0 else out.T)
-
-    on_grid = steger_centres(image(0.0), sigma=2.0, axis=axis)
-    late = image(0.5)
-    half = steger_centres(late, sigma=2.0, axis=axis, half_sample=True)
-    plain = steger_centres(late, sigma=2.0, axis=axis)
-    assert np.all(np.asarray(half.valid)[8:-8]) and np.all(np.asarray(on_grid.valid)[8:-8])
-    d = np.asarray(half.pos - on_grid.pos)[8:-8]
-    assert np.max(np.abs(d)) < 2e-3
-    np.testing.assert_allclose(np.asarray(plain.pos - on_grid.pos)[8:-8], 0.5, atol=2e-2)
