@@ -94,13 +94,13 @@ def one_thread_backend() -> bool:
     to all of its cores after (every thread of the process). Linux only; returns whether
     it applied. Outputs are unchanged (the same kernels, not split).
 
-    Opt-in (`configure`'s ``one_thread``, ``CSLX_ONE_THREAD=1``): the tracking loop gains,
-    the cold full frame loses. Issue 13, two processes in lockstep, frame for frame
-    alternately (`experiments.ab_flags --one-thread b`, the same XLA flags; sunny video
-    seed 0; identical outputs), median ms:
+    Opt-in (`configure`'s ``one_thread``, ``CSLX_ONE_THREAD=1``): the tracking loop gains on
+    a loaded machine, the cold full frame loses. Issue 13, two processes in lockstep, frame
+    for frame alternately (`experiments.ab_flags --one-thread b`, the same XLA flags; sunny
+    video seed 0; identical outputs), median ms:
 
     - tracking mode with MED in the bands: 4.82 → 3.74 (300 frames, load 5–6), 5.26 → 4.99
-      (300, load 6–7);
+      (300, load 6–7), but 4.40 → 4.55 (400, load 2.6): it pays when the other core is busy;
     - the tracker's `tracking_config`: 3.97 → 3.76 (200, load 7);
     - a cold frame with first-pass bands: 10.36 → 7.89 (200, load 6.5);
     - the cold full frame (``roi=False``, large FFTs): 17.68 → 19.20 (80, load 5–6): slower.
