@@ -23,6 +23,9 @@
   5.17 → 4.98 and 4.69 → 4.62 ms median (p10 4.04 → 3.87, 3.80 → 3.68; 600 and 800
   frames), the tracker's tracking mode 3.78 → 3.67 ms, a cold frame 10.02 → 9.76 ms; a
   20 kB threshold 5.07 → 5.16 ms (no gain).
+- **One-thread backend (opt-in).** `one_thread_backend`: XLA's and YNNPACK's CPU thread
+  pools sized for one core; on the loaded 2-core machine a split kernel waits for its
+  slowest part (numbers there).
 - **Quiet CPU start.** On a machine without accelerators JAX probes for a TPU backend and
   logs a warning; `configure` pins the platform to the CPU when nothing else is asked for.
 
@@ -36,7 +39,7 @@ import os
 import sys
 
 __all__ = ["configure", "limit_blas_threads", "set_compile_cache", "small_loops"]
-__all__ += ["SMALL_LOOP_BYTES"]
+__all__ += ["SMALL_LOOP_BYTES", "one_thread_backend"]
 
 #: XLA CPU: while loops touching fewer bytes a trip run as one function each (`small_loops`).
 SMALL_LOOP_BYTES = 1_000_000_000
@@ -81,6 +84,49 @@ def small_loops(threshold: int | str | None = None) -> None:
     os.environ["XLA_FLAGS"] = f"{flags} {option}".strip()
 
 
+def one_thread_backend() -> bool:
+    """Start JAX's CPU backend sized for one core, then give the process all its cores back.
+
+    XLA's CPU runtime splits large loops across a thread pool and YNNPACK runs reductions
+    on its own pool, both sized by the cores the process may run on when the backend
+    starts; each such kernel then waits for its slowest part. The process is restricted to
+    one core while the backend starts (its pools are built for one thread) and released
+    to all of its cores after (every thread of the process). Linux only; returns whether
+    it applied. Outputs are unchanged (the same kernels, not split).
+
+    Opt-in (`configure`'s ``one_thread``, ``CSLX_ONE_THREAD=1``): the tracking loop gains on
+    a loaded machine, the cold full frame loses. Issue 13, two processes in lockstep, frame
+    for frame alternately (`experiments.ab_flags --one-thread b`, the same XLA flags; sunny
+    video seed 0; identical outputs), median ms:
+
+    - tracking mode with MED in the bands: 4.82 → 3.74 (300 frames, load 5–6), 5.26 → 4.99
+      (300, load 6–7), but 4.40 → 4.55 (400, load 2.6): it pays when the other core is busy;
+    - the tracker's `tracking_config`: 3.97 → 3.76 (200, load 7);
+    - a cold frame with first-pass bands: 10.36 → 7.89 (200, load 6.5);
+    - the cold full frame (``roi=False``, large FFTs): 17.68 → 19.20 (80, load 5–6): slower.
+
+    The process pinned to one core instead: tracking with MED 7.56 → 5.53 ms (load 11),
+    and 4.83 against this one's 4.86 ms (load 5–7): the pools' size is what pays.
+    """
+    if not hasattr(os, "sched_setaffinity"):
+        return False
+    cpus = os.sched_getaffinity(0)
+    if len(cpus) < 2:
+        return False
+    os.sched_setaffinity(0, {min(cpus)})
+    try:
+        import jax
+
+        jax.devices()  # the backend and its thread pools start now
+    finally:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), cpus)
+            except OSError:
+                pass
+    return True
+
+
 def set_compile_cache(directory: str | os.PathLike, min_compile_s: float = 0.0) -> None:
     """Use a persistent XLA compilation cache in `directory` (created if missing)."""
     import jax
@@ -96,6 +142,7 @@ def configure(
     compile_cache: str | os.PathLike | None = None,
     quiet_cpu: bool = True,
     small_loop_bytes: int | str | None = None,
+    one_thread: bool | None = None,
 ) -> None:
     """Set the process-wide settings an entry point wants (see the module docstring).
 
@@ -106,6 +153,8 @@ def configure(
             JAX to the CPU so that it does not probe (and warn about) a TPU backend.
         small_loop_bytes: `small_loops`'s threshold (default: CSLX_XLA_SMALL_LOOPS, else
             `SMALL_LOOP_BYTES`; "off" for XLA's default).
+        one_thread: start JAX's CPU backend with one-thread pools (`one_thread_backend`;
+            default: CSLX_ONE_THREAD is 1 / true / on). Starts JAX.
     """
     if quiet_cpu and "JAX_PLATFORMS" not in os.environ and not _accelerator_installed():
         os.environ["JAX_PLATFORMS"] = "cpu"
@@ -114,6 +163,10 @@ def configure(
     cache = compile_cache or os.environ.get("CSLX_JAX_CACHE")
     if cache:
         set_compile_cache(cache)
+    if one_thread is None:
+        one_thread = os.environ.get("CSLX_ONE_THREAD", "").strip().lower() in ("1", "true", "on")
+    if one_thread:
+        one_thread_backend()
 
 
 def _accelerator_installed() -> bool:

@@ -4,14 +4,18 @@ XLA reads ``XLA_FLAGS`` once per process, so `experiments.ab_tracking` (two revi
 process) cannot compare flags. Here two worker processes, one per setting, each hold the
 tracking mode of `experiments.bench_speed` (`process_frame`, consecutive rendered sunny
 video frames, seed 0, state carried; ``--program tracking``: the tracker's
-`tracking_config()`; ``cold``: every frame from `init_state`, the first pass's bands) and
-run one frame at a time when told, alternating which goes first, so that both see the same
-load. Reported: median, p10 and p90 per frame, the load, and the largest difference between
-the two programs' outputs over the first frames. ``CSLX_XLA_SMALL_LOOPS=off`` in both, so
+`tracking_config()`; ``cold``: every frame from `init_state`, the first pass's bands;
+``fullframe``: from `init_state` with ``roi=False``, MED on the whole frame) and run one
+frame at a time when told, alternating which goes first, so that both see the same load.
+Reported: median, p10 and p90 per frame, the load, and the largest difference between the
+two programs' outputs over the first frames. ``CSLX_XLA_SMALL_LOOPS=off`` in both, so
 that `cslx.environment.configure` adds nothing to the flags given.
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_flags --calls 800 \\
         --b="--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=1000000000"
+
+``--one-thread b`` starts the second process's backend with one-thread pools instead
+(`cslx.environment.one_thread_backend`; give both the same flags).
 """
 
 from __future__ import annotations
@@ -52,10 +56,11 @@ def _worker(program: str) -> None:
         i = int(line)
         if i < 0:
             break
-        if program == "cold":
+        if program in ("cold", "fullframe"):
             state = pipeline.init_state(config, sensor.camera.image_size)
         t = time.perf_counter()
-        result, state = pipeline.process_frame(sensor, config, frames[i], state)
+        roi = program != "fullframe"
+        result, state = pipeline.process_frame(sensor, config, frames[i], state, roi=roi)
         jax.block_until_ready((result, state))
         dt = time.perf_counter() - t
         if len(outputs) < 48:
@@ -70,7 +75,15 @@ def main(argv=None) -> None:
     ap.add_argument("--a", default="", help="XLA_FLAGS of the first process (XLA's defaults)")
     ap.add_argument("--b", required=True, help="XLA_FLAGS of the second process")
     ap.add_argument("--calls", type=int, default=600, help="timed frames per process")
-    ap.add_argument("--program", choices=("pipeline", "tracking", "cold"), default="pipeline")
+    ap.add_argument(
+        "--program", choices=("pipeline", "tracking", "cold", "fullframe"), default="pipeline"
+    )
+    ap.add_argument(
+        "--one-thread",
+        choices=("a", "b"),
+        help="start that process's backend with one-thread pools (CSLX_ONE_THREAD=1, "
+        "cslx.environment.one_thread_backend)",
+    )
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
@@ -81,6 +94,7 @@ def main(argv=None) -> None:
     procs = {}
     for name, flags in (("a", args.a), ("b", args.b)):
         env = dict(os.environ, XLA_FLAGS=flags, CSLX_XLA_SMALL_LOOPS="off")
+        env["CSLX_ONE_THREAD"] = "1" if args.one_thread == name else ""
         env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
         procs[name] = subprocess.Popen(
             [sys.executable, "-m", "experiments.ab_flags", "--b=", "--worker", args.program],

@@ -52,3 +52,19 @@ def test_small_loops_flag():
     own = "--xla_backend_extra_options=other=1"
     assert _xla_flags({"XLA_FLAGS": own}) == own
     assert _xla_flags({"CSLX_XLA_SMALL_LOOPS": "off"}) == ""
+
+
+def test_one_thread_backend_gives_the_cores_back():
+    """`one_thread_backend` (issue 13) restricts the process to one core only while JAX's
+    backend starts: afterwards every thread may run on all the cores it had before."""
+    import pytest
+
+    from cslx.environment import one_thread_backend
+
+    if not hasattr(os, "sched_getaffinity"):
+        pytest.skip("no CPU affinity on this platform")
+    before = os.sched_getaffinity(0)
+    applied = one_thread_backend()
+    assert applied == (len(before) > 1)
+    for tid in os.listdir("/proc/self/task"):
+        assert os.sched_getaffinity(int(tid)) == before
