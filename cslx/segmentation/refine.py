@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import reference
 from .path import smooth_path
 from .profile import fit_centres
 from .ridges import PATH_HALF_WINDOW, _path_scatter, noise_std
@@ -458,6 +459,8 @@ def second_pass(
     """
     sa = SIGMA_REFINE if sigma_along is None else float(sigma_along)
     use = valid & ~bridged
+    if reference.RAW_REFERENCE:  # off: `cslx.segmentation.reference`
+        pos = reference.raw_reference(mono, pos, use, sigma=sigma, axis=axis)
     fitted, prec = None, None
     if PROFILE_FIT or PRECISION_WEIGHTS:  # one profile fit for both
         half = int(math.ceil(REACH + 4 * sigma))
