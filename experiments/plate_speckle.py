@@ -46,7 +46,9 @@ Findings (issue 11; development seeds 7100–7117, frames 0–2, 54 frames, H / 
   the run's own mean holds 17 / 30 % of its mean square) because it is already an average
   over windows up to whole plates: its RMS on the plates, 0.040 / 0.038 px, is what a line
   through each whole plate run of the raw centres gives (0.043 px H), i.e. the √N limit of
-  the plates' lengths. White-noise arithmetic: p95 0.08 mm asks for ≈ 100 (H) / 140 (V)
+  the plates' lengths (runs of 181 / 186 centres, centre-weighted median; a line through n
+  centres of RMS 0.27 px and variance factor 1 + 2 Σ ρ = 2.36 averages to 0.27 √(2 · 2.36 /
+  n) = 0.044 px at n = 180). White-noise arithmetic: p95 0.08 mm asks for ≈ 100 (H) / 140 (V)
   independent-equivalent centres averaged at every centre (a line's value at its end needs
   four times as many), more than a plate between a toe and the border offers at its ends.
 - Longer windows: on the plates only (oracle), an extra line ±256 takes H plates 0.078 →
