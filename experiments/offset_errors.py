@@ -54,7 +54,8 @@ Tried, each variant against the default in one process (`experiments.tracking_di
 --variant`), first on the 48 runs of 7301, 7302, 7305, 1201–1203, per kind offset mean /
 max averaged over the runs / worst max mm (default clean 0.083 / 0.375 / 0.69, sunny
 0.107 / 0.422 / 0.86, glare 0.100 / 0.447 / 1.46, shadow 0.091 / 0.445 / 0.90; heading
-unchanged by the filter variants); none kept:
+unchanged by the filter variants); none kept, and their code is not in the tree (options of
+`KalmanConfig`, `WeldFeature` and `PipelineConfig` on the track12i branch's scratch tree):
 
 - the Kalman measurement variance σ² / conf^p instead of σ² / conf (the confidence hardly
   ranks the error: RMS error 0.32–0.33 mm in every confidence bin 0.2–0.8): p = 0.5 sunny
@@ -78,7 +79,11 @@ unchanged by the filter variants); none kept:
   gap of ≥ 4 columns weighted 0.1 / 0 in the bead's fits: sunny 0.131 / 0.133 mean, glare
   0.103 / 0.109, heading misses 0 → 3, offset mean better in 13 runs and worse in 29 (1206
   beside sunny itself 0.149 → 0.173): the edge points are too high but they are the
-  sunlit flank's only evidence. The confidence × (g_ref / g)² for a bead with a g mm gap
+  sunlit flank's only evidence; 12 columns at 0.1 / 0.4: sunny 0.142 / 0.120, offset-mean
+  misses 3 / 1; 4 columns at 0.4: every kind within 0.001 mm of the default's mean, max
+  averaged 0.401–0.427 → 0.389–0.409 mm, but runs better 14 / worse 17, and the beside
+  sunny runs worse (1206 0.149 → 0.183, 1205 0.172 → 0.184, 7301 0.103 → 0.131 mm). The
+  confidence × (g_ref / g)² for a bead with a g mm gap
   (g_ref 1.5 / 2 / 3 mm; Kalman and heading window): sunny mean 0.142 / 0.132 / 0.120,
   offset-mean misses 5 / 4 / 1, heading misses 2 / 3 / 0. Fewer or lighter beads make the
   sunny estimate worse, not better: its error is not the white scatter a lower gain
