@@ -171,6 +171,7 @@ def _stripe(
             ridge_sigma=config.sigma,
             symmetric=symmetric,
             lag=lag,
+            lag_stride=config.roi_lag_stride if lag else 1,
         )
         ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.

@@ -281,10 +281,11 @@ def _med(
     ridge_sigma,
     symmetric=False,
     lag=False,
+    lag_stride=1,
 ):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
     if lag:
-        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric)
+        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, lag_stride)
 
     def step(y, args):
         # y = (filter, Σ_j k_j of the previous filter): the solver's error on the second
@@ -334,6 +335,7 @@ def med(
     ridge_sigma: float = 2.0,
     symmetric: bool = False,
     lag: bool = False,
+    lag_stride: int = 1,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -366,6 +368,9 @@ def med(
             the next frame (`_lagged`; ``max_steps`` and ``tol`` unused, ``steps`` 1,
             ``converged`` False, ``kurtosis`` at ``init``): one inverse-FFT pass (the
             statistics at the new filter) fewer than ``max_steps=1``.
+        lag_stride: with ``lag``, the step (and the statistics: kurtosis, sign, delay) is
+            taken on every ``lag_stride``-th pair of segments only; the output still
+            filters every segment (`_lagged`).
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -377,10 +382,12 @@ def med(
     loading = _default_loading(I.dtype) if loading is None else float(loading)
     delay = _check_delay(delay, symmetric)
     args = (int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma))
-    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag))
+    if int(lag_stride) < 1:
+        raise ValueError(f"lag_stride must be a positive integer, got {lag_stride!r}")
+    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag), int(lag_stride))
 
 
-def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric):
+def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1):
     """`med`'s ``lag``: the output of the warm-start filter W0, and one step from it.
 
     One fixed-point step W1 = update(W0) needs the output statistics at W0 (`med_fft.update`
@@ -389,10 +396,15 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric):
     statistics) before its output. Both variants take one step a frame from the previous
     frame's filter and share the fixed point (W1 = W0 there); the lagged one filters frame t
     with the filter of the step taken on frame t − 1.
+
+    ``stride`` > 1: the statistics and the step on every stride-th packed pair of segments
+    (`med_fft.pairs`: slices of the spectra already computed, no FFT of their own), the
+    output on all of them.
     """
-    W1, st = _f.update(W0, pb, loading, symmetric)
-    delay, sign = _delay(W0, st, pb, delay_kind, ridge_sigma)
-    if delay_kind == "centre" and pb.L % 2:
+    sub = pb if stride == 1 else _f.pairs(pb, stride)
+    W1, st = _f.update(W0, sub, loading, symmetric)
+    delay, sign = _delay(W0, st, sub, delay_kind, ridge_sigma)
+    if delay_kind == "centre" and pb.L % 2 and stride == 1:
         out = _f.centre_output(st, sign, pb)
     elif delay_kind == "centre":
         out = _f.shifted_output(W0 * sign, (pb.L - 1) / 2, pb)

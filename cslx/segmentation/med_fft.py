@@ -89,6 +89,19 @@ def prepare(X: Float[Array, "s m"], L: int) -> Problem:
     return Problem(X0, Z, Xa, Xb, _abs2(Xa), _abs2(Xb), m, s, L, n)
 
 
+def pairs(pb: Problem, stride: int) -> Problem:
+    """The problem of every ``stride``-th packed pair of segments (2j, 2j + 1), j = 0, k, 2k …
+
+    Slices of the spectra `prepare` computed (no FFT); the time-domain segments follow
+    (a zero segment pads an odd count, as in `prepare`)."""
+    X = pb.X
+    if pb.s % 2:
+        X = jnp.concatenate([X, jnp.zeros((1, pb.m), X.dtype)])
+    X = X.reshape(-1, 2, pb.m)[::stride].reshape(-1, pb.m)
+    Z, Xa, Xb, Pa, Pb = (a[::stride] for a in (pb.Z, pb.Xa, pb.Xb, pb.Pa, pb.Pb))
+    return Problem(X, Z, Xa, Xb, Pa, Pb, pb.m, X.shape[0], pb.L, pb.n)
+
+
 def _abs2(z):
     return z.real * z.real + z.imag * z.imag
 

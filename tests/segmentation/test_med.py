@@ -606,3 +606,24 @@ def test_lagged_step_outputs_the_start_filter_and_steps_once(symmetric, axis):
     assert float(lag.kurtosis) == pytest.approx(float(kurt), abs=1e-9)
     # the step moved the filter: the lagged output is not the stepped one
     assert float(jnp.max(jnp.abs(lag.filter - W0))) > 1e-6
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_lagged_step_on_every_other_pair_of_segments(axis):
+    """``lag_stride`` (tracking bands, issue 13): the output is the lagged output on every
+    segment, the step (and the kurtosis) those of the segments (2j, 2j + 1), j even, alone."""
+    truth = 30 + 3 * np.sin(np.arange(96) / 9)
+    I = jnp.asarray(stripe_image(64, 96, truth, speckle=0.2, seed=5))
+    prev = jnp.asarray(stripe_image(64, 96, truth + 0.7, speckle=0.2, seed=6))
+    I, prev = (I, prev) if axis == 0 else (I.T, prev.T)
+    kw = dict(axis=axis, L=16, symmetric=True)
+    W0 = med(prev, max_steps=60, **kw).filter
+    lag = med(I, init=W0, lag=True, **kw)
+    strided = med(I, init=W0, lag=True, lag_stride=2, **kw)
+    np.testing.assert_allclose(np.asarray(strided.output), np.asarray(lag.output), atol=1e-12)
+    keep = np.asarray([j for j in range(96) if (j // 2) % 2 == 0])
+    sub = med(I[:, keep] if axis == 0 else I[keep], init=W0, lag=True, **kw)
+    np.testing.assert_allclose(np.asarray(strided.filter), np.asarray(sub.filter), atol=1e-12)
+    assert float(strided.kurtosis) == pytest.approx(float(sub.kurtosis), abs=1e-9)
+    # half the segments give another step than all of them
+    assert float(jnp.max(jnp.abs(strided.filter - lag.filter))) > 1e-6
