@@ -42,7 +42,9 @@ What it showed (dev seeds 7301, 7302, 7305, 1201–1206, both placements, every 
   159.4 / 160.4 (the highest apex wins in `crossing_feature`), so the bar's first three
   agreeing sightings are frames 19–21 and it is reported from frame 21: 27 / 33 even
   without any false report. No filter on the tracker's side can lift that run above 90 %;
-  the bar has to be sighted on frames 15–18.
+  the bar has to be sighted on frames 15–18 (on 15 and 18 `crossing_feature` finds no
+  candidate at all, bar included; were frames 16 / 17 the bar, it would confirm at frame
+  19 and recall would be 29 / 33 = 87.9 %, still short: the fix is in the detector).
 - the far-side height: every true sighting whose far side is measured (1853 of 2038) has
   the points 1–9 mm beyond its far toe at z_r −0.38 to +0.35 mm (the plate); artefacts
   −1.51 to +2.27 (73 sightings, 17 above 0.45 mm: 1205 glare frames 5 / 6 at 0.53 /
