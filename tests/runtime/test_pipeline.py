@@ -117,20 +117,50 @@ def test_black_frame_keeps_state_finite(scene):
 
 def test_tracking_loop_compiles_once(scene):
     """Carrying the state from frame to frame hits the jit cache (issue 13: a re-trace per
-    call would be a hidden per-frame cost); the state keeps its dtypes and shapes."""
-    from cslx.runtime.pipeline import _process_frame
+    call would be a hidden per-frame cost); the state keeps its dtypes and shapes. The
+    program is the one bound to this sensor and config (`_bound`), reused, and an equal
+    config finds it too."""
+    from cslx.runtime.pipeline import _bound
 
     sensor, config, frames = scene
     state = init_state(config, sensor.camera.image_size)
     _, state = process_frame(sensor, config, frames[0][0], state)
-    size = _process_frame._cache_size()
+    program = _bound(sensor, config, True)
+    assert program is not None and _bound(sensor, dataclasses.replace(config), True) is program
+    size = program._cache_size()
     first = [(x.dtype, x.shape, x.weak_type) for x in jax.tree_util.tree_leaves(state)]
     for k in range(4):  # NumPy and device frames, two scenes
         img = frames[k % 2][0]
         _, state = process_frame(sensor, config, img if k % 2 else jnp.asarray(img), state)
     assert bool(state.tracking)
-    assert _process_frame._cache_size() == size
+    assert program._cache_size() == size == 1
     assert [(x.dtype, x.shape, x.weak_type) for x in jax.tree_util.tree_leaves(state)] == first
+
+
+def test_bound_program_equals_generic_and_steps_aside_under_tracing(scene):
+    """The bound program gives the generic jit's result (float32 rounding apart), and a
+    traced sensor (under `jax.jit`, `jax.grad`, `jax.vmap`) takes the generic program."""
+    from cslx.runtime.pipeline import _bound, _process_frame
+
+    sensor, config, frames = scene
+    state = init_state(config, sensor.camera.image_size)
+    img = jnp.asarray(frames[0][0])
+    bound, _ = process_frame(sensor, config, img, state, roi=False)
+    generic, _ = _process_frame(sensor, config, img, state, False)
+    ok = np.asarray(bound.centres_h.valid & generic.centres_h.valid)
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(
+        np.asarray(bound.centres_h.pos)[ok], np.asarray(generic.centres_h.pos)[ok], atol=1e-3
+    )
+    seen = []
+
+    @jax.jit
+    def traced(s):  # the sensor's leaves are tracers here
+        seen.append(_bound(s, config, False))
+        return jnp.zeros(())
+
+    traced(sensor)
+    assert seen == [None]
 
 
 def test_steger_sigma_scales_with_large_frames():
