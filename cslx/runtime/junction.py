@@ -27,14 +27,28 @@ The apex tests run on the first `MAX_TOES` toes rather than on every point (a 16
 instead of a 480 × 480 comparison, twice): `crossing_feature` 1.23 → 0.76 ms in an
 interleaved A/B run at load ≈ 20 (issue 13), with identical features on 84 rendered
 frames; a profile with more toes takes the tests on every point (`lax.cond`).
+
+In the tracking program (`cslx.runtime.weld.weld_features`) everything after the order along
+x_r runs as one compiled function (``one_call``; `cslx.runtime.small_ops.one_function`):
+the apex tests take one toe at a time and the full far-side search one point at a time,
+since a (toe, point) or (point, point) array's float minima went to XLA's library
+reductions, which keep a loop from compiling as one function; and the order comes without
+a sort where x_r rises or falls along the rows (`_x_order`). Issue 13, `experiments.ab_weld`
+(200 tracking frames each of the sunny and glare videos, seeds 0 and 555, 600 interleaved
+calls, load 6.5): weld features 0.715 → 0.614 ms median, outputs identical bit for bit;
+tracking mode with MED (`experiments.ab_tracking`, 300 interleaved frames, load 5.8) 4.13 →
+3.97 ms median, outputs identical.
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from .small_ops import one_function
 from .weld import (
     VERTICAL_AXIS,
     WeldConfig,
@@ -55,9 +69,9 @@ def _first_argmax(a: Float[Array, "k n"]) -> Array:
     took `crossing_feature` from 1.67 to 0.96 ms (issue 13; tracking video, load 2–5, same
     run), with identical outputs (tests/runtime/test_junction.py).
     """
-    top = jnp.max(a, axis=1, keepdims=True)
-    index = jax.lax.broadcasted_iota(jnp.int32, a.shape, 1)
-    return jnp.min(jnp.where((a == top) | jnp.isnan(a), index, a.shape[1]), axis=1)
+    top = jnp.max(a, axis=-1, keepdims=True)
+    index = jax.lax.broadcasted_iota(jnp.int32, a.shape, a.ndim - 1)
+    return jnp.min(jnp.where((a == top) | jnp.isnan(a), index, a.shape[-1]), axis=-1)
 
 
 #: Toes whose apex test runs on the short path of `crossing_feature` (more take the long one).
@@ -85,19 +99,24 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
     n = t.shape[0]
     live = rows < n
     r = jnp.clip(rows, 0, n - 1)
-    t_r = t[r]
     half_max = 0.5 * config.max_width_mm
-    dt = t[None, :] - t_r[:, None]  # [toe, point]: point's t minus the toe's t
-    win = ok[None, :] & (dt <= 0.0) & (dt >= -half_max)
-    apex = _first_argmax(jnp.where(win, h[None, :], -jnp.inf))
+
+    def one_toe(i):
+        dt = t - t[i]  # point's t minus the toe's t
+        apex = _first_argmax(jnp.where(ok & (dt <= 0.0) & (dt >= -half_max), h, -jnp.inf))
+        t_apex = t[apex]
+        half = 0.5 * (t[i] + t[nxt_c[i]]) - t_apex
+        # rises to the apex from the near side: the lowest point in the half-width before it
+        near = ok & (t < t_apex) & (t >= t_apex - half)
+        return apex, jnp.min(jnp.where(near, h, jnp.inf)), jnp.any(near)
+
+    # one toe at a time: a (toe, point) array's float minima and maxima went to XLA's
+    # library reductions, which keep the caller's loop from compiling as one function
+    apex, h_before, has_near = jax.lax.map(one_toe, r)
     h_apex = h[apex]
     t_apex = t[apex]
-    t_toe = 0.5 * (t_r + t[nxt_c[r]])  # between the last bead point and the first plate point
+    t_toe = 0.5 * (t[r] + t[nxt_c[r]])  # between the last bead point and the first plate point
     half = t_toe - t_apex
-    # rises to the apex from the near side: the lowest point in the half-width before it
-    near = ok[None, :] & (t[None, :] < t_apex[:, None]) & (t[None, :] >= (t_apex - half)[:, None])
-    h_before = jnp.min(jnp.where(near, h[None, :], jnp.inf), axis=1)
-    has_near = jnp.any(near, axis=1)
     rise = h_apex - jnp.where(has_near, h_before, h_apex)
     good = (
         live
@@ -122,10 +141,14 @@ def _far_low(t, h, ok, width, band: int):
     (an (n, band) rather than an (n, n) array); ``band`` = n is the full search.
     """
     n = t.shape[0]
-    if band >= n:
-        dt = t[None, :] - t[:, None]
-        beyond = ok[None, :] & (dt >= 0.0) & (dt <= width)
-        return jnp.min(jnp.where(beyond, h[None, :], jnp.inf), axis=1)
+    if band >= n:  # one point j at a time (a loop, no (n, n) array: see `_best_apex`)
+
+        def point(j, low):
+            dt = t[j] - t
+            keep = ok[j] & (dt >= 0.0) & (dt <= width)
+            return jnp.minimum(low, jnp.where(keep, h[j], jnp.inf))
+
+        return jax.lax.fori_loop(0, n, point, jnp.full((n,), jnp.inf, h.dtype))
     pad = lambda x, v: jnp.concatenate([x, jnp.full((band,), v, x.dtype)])  # noqa: E731
     tp, hp, okp = pad(t, jnp.inf), pad(h, jnp.inf), pad(ok, False)
     low = jnp.full((n,), jnp.inf, h.dtype)
@@ -176,8 +199,48 @@ def _above_far_side(
     return h - low, low
 
 
+def _monotone_order(key: Float[Array, " n"], valid: Bool[Array, " n"]):
+    """(``jnp.argsort(key)``, True) where the valid keys rise or fall strictly along the
+    profile, without a sort; (anything, False) otherwise. Invalid keys are +inf.
+
+    The stable order is then the valid points in index order (rising) or in reverse
+    (falling), followed by the invalid ones in index order; the k-th valid point is the first
+    index where the running count of valid points reaches k (a binary search, exact).
+    """
+    n = key.shape[0]
+    j = jnp.arange(n, dtype=jnp.int32)
+    inf = jnp.full((1,), jnp.inf, key.dtype)
+    low = jnp.concatenate([inf, jax.lax.cummin(key)[:-1]])  # least valid key before each
+    high = jnp.concatenate([-inf, jax.lax.cummax(jnp.where(valid, key, -jnp.inf))[:-1]])
+    rising = jnp.all(~valid | (key > high))
+    falling = jnp.all(~valid | (key < low))
+    n_valid = jnp.sum(valid.astype(jnp.int32))
+    count_valid = jnp.cumsum(valid.astype(jnp.int32))
+    count_invalid = jnp.cumsum((~valid).astype(jnp.int32))
+    k_valid = jnp.where(rising, j + 1, n_valid - j)
+    first = functools.partial(jnp.searchsorted, side="left", method="scan")
+    order = jnp.where(
+        j < n_valid, first(count_valid, k_valid), first(count_invalid, j - n_valid + 1)
+    )
+    return order.astype(jnp.int32), rising | falling
+
+
+def _x_order(key, valid, one_call: bool):
+    """``jnp.argsort(key)`` (stable), sort-free where the valid keys are monotone (rendered
+    vertical stripe: x_r falls along the rows on 390 of 400 frames, sunny video seeds 0 and
+    555); XLA's CPU sort of 480 keys took ≈ 50 µs (a comparator call per comparison)."""
+    fast, monotone = (
+        one_function(_monotone_order, key, valid) if one_call else _monotone_order(key, valid)
+    )
+    return jax.lax.cond(monotone, lambda: fast, lambda: jnp.argsort(key).astype(jnp.int32))
+
+
 def crossing_feature(
-    points: Float[Array, "n 3"], valid: Bool[Array, " n"], config: WeldConfig = WeldConfig()
+    points: Float[Array, "n 3"],
+    valid: Bool[Array, " n"],
+    config: WeldConfig = WeldConfig(),
+    *,
+    one_call: bool = False,
 ) -> WeldFeature:
     """The crossing bead on the vertical stripe, found from its far side (module docstring).
 
@@ -185,20 +248,29 @@ def crossing_feature(
         points: (H, 3) robot-frame points of the vertical stripe (mm), any order along it.
         valid: (H,) which points exist.
         config: `cslx.runtime.weld.WeldConfig` (threshold, height and width limits, cap fit).
+        one_call: run everything after the sort along x_r as one function
+            (`cslx.runtime.small_ops.one_function`): the same values; not
+            reverse-differentiable (a while loop), so off by default.
     Returns:
         `WeldFeature` with position = the crossing weld's x_r; jit/vmap-able.
     """
     points, valid = _check_profile(points, valid, "crossing_feature")
-    dtype = points.dtype
-    n = points.shape[0]
     P = jnp.where(valid[:, None], points, 0.0)
+    # sort along x_r (far = large x) so that runs and toes do not depend on the row order
+    key = jnp.where(valid, P[:, VERTICAL_AXIS], jnp.inf)
+    order = _x_order(key, valid, one_call)
+    rest = functools.partial(_crossing, config=config)
+    return one_function(rest, P, valid, order) if one_call else rest(P, valid, order)
+
+
+def _crossing(P, valid, order, *, config: WeldConfig) -> WeldFeature:
+    """`crossing_feature` on a profile ``P`` (zero where not ``valid``) and its x_r order."""
+    dtype = P.dtype
+    n = P.shape[0]
     w0 = valid.astype(dtype)
     n_valid = jnp.sum(w0)
     x_raw, z = P[:, VERTICAL_AXIS], P[:, 2]
     x_mean = jnp.sum(w0 * x_raw) / jnp.maximum(n_valid, 1.0)
-    # sort along x_r (far = large x) so that runs and toes do not depend on the row order
-    key = jnp.where(valid, x_raw, jnp.inf)
-    order = jnp.argsort(key)
     x = jnp.where(valid, x_raw - x_mean, 0.0)[order]
     z = z[order]
     ok = valid[order]

@@ -562,7 +562,8 @@ def weld_features(
     # one: in rendered sunlight every stray junction report lay within 10 mm of it
     x_h = masked_median(profile_h[:, VERTICAL_AXIS], valid_h)  # = nanmedian, no sort
     away = jnp.abs(profile_v[:, VERTICAL_AXIS] - x_h) > config.crossing_mask_mm
-    fv = crossing_feature(profile_v, valid_v & (away | ~jnp.isfinite(x_h)), config)
+    keep_v = valid_v & (away | ~jnp.isfinite(x_h))  # crossing: one function, sort-free
+    fv = crossing_feature(profile_v, keep_v, config, one_call=True)
     junction = fv.found & (fv.confidence >= config.junction_min_confidence)
     return fh, fv, junction
 

@@ -217,3 +217,33 @@ def test_crossing_on_a_flank_measured_against_the_plate_beyond(bar_x, hi, lo):
     assert abs(float(f.height) - 1.9) < 0.3, float(f.height)
     old = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig(crossing_background_mm=0.0))
     assert not (bool(old.found) and float(old.height) >= 1.0) or lo == hi
+
+
+@pytest.mark.parametrize("case", ["rising", "falling", "unsorted", "none_valid"])
+@pytest.mark.parametrize("one_call", [False, True])
+def test_sort_free_order_equals_argsort(case, one_call):
+    """`_x_order` (no sort where the valid keys are monotone) is the stable `jnp.argsort`."""
+    rng = np.random.default_rng(17)
+    x = np.cumsum(rng.uniform(0.1, 0.4, 480)).astype(np.float32)
+    if case == "falling":
+        x = x[::-1].copy()
+    if case == "unsorted":
+        x[100], x[101] = x[101], x[100]
+    valid = rng.random(480) > (1.0 if case == "none_valid" else 0.2)
+    key = jnp.where(jnp.asarray(valid), jnp.asarray(x), jnp.inf)
+    got = jax.jit(junction._x_order, static_argnums=2)(key, jnp.asarray(valid), one_call)
+    np.testing.assert_array_equal(np.asarray(got), np.asarray(jnp.argsort(key)))
+
+
+def test_crossing_as_one_function_equals_plain_call():
+    """`crossing_feature(..., one_call=True)` (one compiled function, no sort) equals the plain
+    call bit for bit, rows in either order."""
+    rng = np.random.default_rng(4)
+    for bar_x, flank in ((170.0, None), (150.0, (1.0, 1.2))):
+        pts, valid = vertical_stripe(rng, bar_x=bar_x, flank=flank)
+        for P, V in ((pts, valid), (pts[::-1], valid[::-1])):
+            P, V = jnp.asarray(P), jnp.asarray(V)
+            plain = jax.jit(crossing_feature)(P, V, WeldConfig())
+            one = jax.jit(lambda p, v: crossing_feature(p, v, WeldConfig(), one_call=True))(P, V)
+            for a, b in zip(plain, one, strict=True):
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
