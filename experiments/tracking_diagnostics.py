@@ -435,6 +435,10 @@ def diagnose(tracker, seq: dict, worst: int = 5, verbose: bool = True) -> dict:
         meas_max=float(np.nanmax(np.abs(em))),
         n_meas_05=int(np.sum(np.abs(em) > 0.5)),
         n_meas_1=int(np.sum(np.abs(em) > 1.0)),
+        latency_ms=float(np.median([o.latency_ms for o in obs[1:]])),
+        # that MED runs where a variant says it does: frames in the bands, MED steps a frame
+        roi_pct=100.0 * float(np.mean([o.raw.get("used_roi", 0.0) for o in obs])),
+        med_steps=float(np.mean([o.med_steps for o in obs])),
     )
     if verbose:
         order = sorted(rows, key=lambda r: -abs(r["e_off"]) if math.isfinite(r["e_off"]) else 0)
@@ -461,7 +465,10 @@ def variant_config(spec: str):
         key, value = item.split("=")
         if key.startswith("kalman."):
             continue
-        value = float(value) if "." in value or "e" in value else int(value)
+        if value in ("True", "False"):
+            value = value == "True"
+        else:
+            value = float(value) if "." in value or "e" in value else int(value)
         if key.startswith("weld."):
             weld = dataclasses.replace(config.weld, **{key[5:]: value})
             config = dataclasses.replace(config, weld=weld)
@@ -500,6 +507,8 @@ def summary(rows: list[dict]) -> str:
         v = np.array([r[key] for r in rows], float)
         bad = v < bound if cmp == ">=" else v > bound
         misses.append(f"{key} {int(np.sum(bad))}")
+    lat = np.median([r["latency_ms"] for r in rows])
+    out.append(f"latency_ms median of the runs' medians {lat:.2f}")
     recall = np.nanmin([r["t_recall_pct"] for r in rows])
     false = sum(r["t_false"] for r in rows)
     return "; ".join(out) + f"; recall min {recall:.1f} false {false}; misses: " + ", ".join(misses)
@@ -517,7 +526,8 @@ def main() -> None:
         action="append",
         default=[],
         help="pipeline settings to compare with the default, e.g. 'crossing_gap_px=8' "
-        "(comma-separated; repeatable; 'weld.x=v' for the weld settings)",
+        "(comma-separated; repeatable; 'weld.x=v' for the weld settings; True / False "
+        "for a flag, e.g. 'use_med=True')",
     )
     p.add_argument("--quiet", action="store_true", help="summary lines only")
     p.add_argument("--also-seed", type=int, action="append", default=[], help="(repeatable)")
@@ -569,6 +579,9 @@ def main() -> None:
                         "meas_max",
                         "n_meas_05",
                         "n_meas_1",
+                        "latency_ms",
+                        "roi_pct",
+                        "med_steps",
                     )
                     print("  " + " ".join(f"{k}={s[k]:.3g}" for k in keys), flush=True)
     for name, rows in totals.items():

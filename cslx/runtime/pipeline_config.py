@@ -258,6 +258,30 @@ def tracking_config():
     where MED's filter moves the stripe under the bead's sheen. MED stays the default of
     `PipelineConfig` (the paper's method, Table 6).
 
+    MED in the bands, re-measured (2026-12-05, issues 12 / 13; band MED since linear-phase,
+    ridge delay, lagged step, ``roi_lag_stride`` 2; fill and weights as below): this config
+    with ``use_med=True`` (bands on every frame, MED 2.4 steps a frame h + v, first passes
+    converged) against it, experiments/tracking_diagnostics.py ``--variant use_med=False
+    --variant use_med=True``, one process. 48 dev T approaches (seeds 7301, 7302, 7305,
+    1201–1203), per kind offset mean / max averaged over the runs / worst max mm, heading
+    mean °, without → with: clean 0.083 / 0.375 / 0.69 / 0.147 → 0.076 / 0.332 / 0.60 /
+    0.151, sunny 0.107 / 0.422 / 0.86 / 0.223 → 0.110 / 0.459 / 0.87 / 0.179, glare
+    0.100 / 0.447 / 1.46 / 0.187 → 0.099 / 0.407 / 0.80 / 0.195, shadow 0.091 / 0.445 /
+    0.90 / 0.174 → 0.093 / 0.433 / 0.89 / 0.171. Runs meeting every goal 47 → 46: 7305
+    flank glare offset max 1.46 → 0.51 mm met, but a false T there (0 → 7 frames, confirmed
+    at 209 mm, 11 mm short of the bar: the default measures a crossing bead there too,
+    frames 9, 10, 13, but does not confirm it), 7301 flank glare T recall 93.1 → 79.3 %. Seeds
+    1204–1206 (24 runs): clean 0.081 / 0.388 / 0.70 / 0.170 → 0.080 / 0.374 / 0.63 / 0.167,
+    sunny 0.125 / 0.412 / 0.62 / 0.183 → 0.123 / 0.422 / 0.64 / 0.251, glare 0.091 / 0.311
+    / 0.45 / 0.159 → 0.103 / 0.368 / 0.51 / 0.178, shadow 0.083 / 0.391 / 0.69 / 0.173 →
+    0.087 / 0.426 / 0.66 / 0.161; runs meeting every goal 22 → 23 (1205 flank sunny false T
+    8 → 0 frames; 1205 flank glare recall 81.8 % and false T 14 → 8 frames, missed both
+    ways). Tracker step, median of the runs' medians (load ≈ 5, same process, the
+    diagnostics' profile copies included): 5.25 → 7.34 ms (48 runs), 4.47 → 7.63 ms (24);
+    per run ×1.37 / ×1.50. So band MED no longer costs accuracy (the 2026-11-30 numbers
+    above are out of date), but over 72 runs it gains none either (goal misses 4 → 4; with MED
+    all 4 are T reports in glare) for ≈ 2–3 ms a frame: the tracker stays without it.
+
     The clipped-core fill is domed (`PipelineConfig.clip_dome*`: height 1, down the columns
     only, runs longer than 7 px, at most half of a run's pixels white): on sunlit bead
     flanks the red channel clips over 8–14 rows, and the flat fill left a plateau with no
