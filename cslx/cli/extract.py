@@ -261,6 +261,10 @@ def _extract(args, space, stripes, sensor) -> int:
                     continue
                 if gray_weights and is_gray(rgb):
                     stats.gray += 1
+                    if batched:  # the rows stay in input order
+                        _flush(batched, stripes, args, sigma, sensor, out, stats)
+                    if bands is not None:
+                        bands.finish(sensor, out, stats)
                     _one_image(path, rgb, stripes, args.method, GRAY_WEIGHTS, sigma, sensor, out,
                                stats, record=False)  # fmt: skip
                     continue
