@@ -90,10 +90,10 @@ def truncation_problem(path: str) -> str | None:
         tail = f.read()
     if head.startswith(_PNG_SIGNATURE):
         if _PNG_IEND not in tail:
-            return "truncated PNG file (no IEND chunk at its end); was the copy complete?"
+            return "truncated PNG file (no IEND chunk at its end: an incomplete copy?)"
     elif head.startswith(_JPEG_SOI):
         if _JPEG_EOI not in tail:
-            return "truncated JPEG file (no end-of-image marker); was the copy complete?"
+            return "truncated JPEG file (no end-of-image marker: an incomplete copy?)"
     return None
 
 
