@@ -27,6 +27,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ..images import truncation_problem
 from ..sensor.rig import CalibrationError, Sensor, sensor_from_arrays
 from .camera import CameraCalibration, calibrate_camera
 from .corners import board_points, detect_corners
@@ -50,6 +51,9 @@ def read_image(image) -> np.ndarray:
             raise IsADirectoryError(f"{path}: is a directory, not an image")
         if not os.path.exists(path):
             raise FileNotFoundError(f"{path}: no such file")
+        why = truncation_problem(path)
+        if why:
+            raise OSError(f"{path}: {why}")
         bgr = cv2.imread(path, cv2.IMREAD_COLOR)
         if bgr is None:
             raise OSError(f"{path}: not an image OpenCV can read")
@@ -257,12 +261,20 @@ def calibrate_sensor(
         corners.append(c)
         used.append(i)
     if len(used) < min_views:
+        hint = ""
+        if not used and any(b.startswith("no ") and "board found" in b for _, b in skipped):
+            # no board in any readable image: most often the pattern, not the photos
+            hint = (
+                f"; is the pattern {pattern[0]}x{pattern[1]} right? It counts the board's "
+                "inner corners, columns x rows (a board of 10 × 7 squares has 9x6)"
+            )
         raise CalibrationError(
             f"the board was found in {len(used)} of {n} images; at least {min_views} are "
             f"needed ({len(skipped)} skipped: "
             + "; ".join(f"{os.path.basename(a)}: {b}" for a, b in skipped[:5])
             + (" …" if len(skipped) > 5 else "")
             + ")"
+            + hint
         )
     obj = board_points(pattern, square)
     say(f"camera: {len(used)} views ({len(skipped)} skipped) ...")

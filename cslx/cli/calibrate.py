@@ -31,8 +31,6 @@ import sys
 NAME = "calibrate"
 HELP = "chessboard (+ laser) images → calibration JSON (camera, laser plane(s), robot frame)"
 
-_EXTS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -76,11 +74,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _list_images(spec: str) -> list[str]:
     if os.path.isdir(spec):
-        files = [os.path.join(spec, f) for f in os.listdir(spec)]
-        files = [f for f in files if f.lower().endswith(_EXTS) and not os.path.isdir(f)]
-    else:
-        files = [f for f in glob.glob(spec) if not os.path.isdir(f)]
-    return sorted(files)
+        from ..images import list_images
+
+        return list_images(spec)
+    return sorted(f for f in glob.glob(spec) if not os.path.isdir(f))
 
 
 def _parse_pattern(text: str) -> tuple[int, int]:

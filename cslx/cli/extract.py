@@ -12,6 +12,12 @@ in which every image failed leaves no file (a previous one stays as it was). On 
 summary line gives the images, the centres per stripe and the colour weights used (the ones
 `--space auto` chose).
 
+Images are read by `cslx.images.read_rgb`: any format OpenCV decodes, grayscale files as three
+equal channels, alpha dropped, 16-bit scaled to 8 bits, EXIF orientation applied; a truncated
+PNG or JPEG is reported and skipped (OpenCV would decode half a JPEG). A grayscale image (a
+monochrome camera) gets `GRAY_WEIGHTS` instead of fixed colour weights such as R − G, which are
+zero on it; the default method's `--space auto` finds the stripe in it by itself.
+
 The default method "linked" (issue 11: candidate ridges linked along the stripe, clipped cores,
 width-aware σ; evidence in results/robust_extraction.md) adds the optional columns `sigma_px`
 (predicted standard deviation of the centre along the search axis, px) and `saturated` (1: the
@@ -53,6 +59,11 @@ READ_AHEAD = 8
 READ_THREADS = 1  # one decoder keeps ahead of the compute; more compete with XLA on 2 cores
 #: Images per compiled call of the band MED path (`--method med` with fixed colour weights).
 MED_BATCH = 8
+#: Colour weights for a grayscale image (a monochrome camera's frame, R = G = B): its gray
+#: values themselves. Fixed weights that sum to zero, like the default R − G of the paper's
+#: methods, would turn it into a black image; the linked method's kurtosis search (`auto`)
+#: already finds the stripe in one and keeps its own weights.
+GRAY_WEIGHTS = (1.0, 0.0, 0.0)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -91,25 +102,11 @@ def _usage_error(msg: str) -> int:
     return 2
 
 
-def check_images(paths: list[str]) -> str | None:
-    """The first problem with the image paths (missing, a directory), or None."""
-    for path in paths:
-        if os.path.isdir(path):
-            return f"{path}: is a directory; give the image files in it (e.g. {path}/*.png)"
-        if not os.path.exists(path):
-            return f"{path}: no such file; check the path"
-    return None
-
-
 def _read_rgb(path: str):
-    import cv2
+    """8-bit RGB pixels (`cslx.images.read_rgb`: gray, alpha, 16-bit, EXIF, truncated files)."""
+    from ..images import read_rgb
 
-    if not os.path.isfile(path):
-        raise OSError("no such file")
-    bgr = cv2.imread(path, cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise OSError("not a readable image")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+    return read_rgb(path)
 
 
 def read_ahead(paths, ahead: int = READ_AHEAD, threads: int = READ_THREADS):
@@ -175,7 +172,9 @@ def run(args: argparse.Namespace) -> int:
         return _usage_error(
             f"--sigma {args.sigma}: must be a positive number of pixels (Steger's scale, e.g. 2)"
         )
-    problem = check_images(args.images)
+    from ..images import paths_problem
+
+    problem = paths_problem(args.images)
     if problem:
         return _usage_error(problem)
     why = output_problem(args.out)
@@ -200,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             sensor = load_sensor(args.calib)
         except (OSError, CalibrationError) as err:
-            return _usage_error(f"calibration {args.calib}: {err}")
+            return _usage_error(f"--calib: {err}")  # the message names the file
         if any(not sensor.has_plane(s) for s in stripes):
             # A one-plane (line-laser) calibration triangulates its own stripe only.
             have = sensor.plane_stripes
@@ -236,6 +235,7 @@ def _extract(args, space, stripes, sensor) -> int:
     stats = _Stats(stripes)
     t0 = time.perf_counter()
     batched = _sharded_path(args)
+    gray_weights = not (linked and space == "auto")  # fixed weights: gray frames need others
     bands = _band_path(args, stripes, sigma) if batched is None else None
     try:
         with atomic_write(args.out, "w", newline="") as out:
@@ -258,6 +258,15 @@ def _extract(args, space, stripes, sensor) -> int:
                     stats.fail(
                         path, f"image is {w}×{h} but the calibration is for {cw}×{ch}; skipped"
                     )
+                    continue
+                if gray_weights and is_gray(rgb):
+                    stats.gray += 1
+                    if batched:  # the rows stay in input order
+                        _flush(batched, stripes, args, sigma, sensor, out, stats)
+                    if bands is not None:
+                        bands.finish(sensor, out, stats)
+                    _one_image(path, rgb, stripes, args.method, GRAY_WEIGHTS, sigma, sensor, out,
+                               stats, record=False)  # fmt: skip
                     continue
                 if batched is not None:
                     batched.append((path, rgb))
@@ -295,6 +304,12 @@ def _extract(args, space, stripes, sensor) -> int:
         f"{dt:.1f} s ({1e3 * dt / n:.1f} ms/image)",
         file=sys.stderr,
     )
+    if stats.gray:
+        print(
+            f"cslx extract: {stats.gray} of {n} images are grayscale (R = G = B): their gray "
+            "values were used, since colour weights cannot separate a stripe in them",
+            file=sys.stderr,
+        )
     if stats.failed:
         print(f"cslx extract: {stats.failed} of {n} images failed", file=sys.stderr)
     return 1 if stats.failed else 0
@@ -306,6 +321,7 @@ class _Stats:
     def __init__(self, stripes):
         self.ok = 0
         self.failed = 0
+        self.gray = 0  # grayscale images given GRAY_WEIGHTS
         self.centres = {s: [] for s in stripes}
         self.weights = {s: [] for s in stripes}
 
@@ -327,7 +343,21 @@ class _Stats:
         return f"{space}: {text}"
 
 
-def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats) -> None:
+def is_gray(rgb) -> bool:
+    """Whether an (H, W, 3) frame is grayscale (R = G = B everywhere: a monochrome camera's
+    file, decoded to three equal channels). A sparse sample first, so a colour frame costs
+    microseconds."""
+    import numpy as np
+
+    s = rgb[::16, ::16]
+    if not (np.array_equal(s[..., 0], s[..., 1]) and np.array_equal(s[..., 1], s[..., 2])):
+        return False
+    return bool(
+        np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 1], rgb[..., 2])
+    )
+
+
+def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats, record=True) -> None:
     import numpy as np
 
     from ..segmentation import centres_to_pixels, extract
@@ -350,7 +380,8 @@ def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats) -> 
         except Exception as err:  # one bad frame must not lose the others
             print(f"cslx extract: {path}: stripe {stripe}: {err}", file=sys.stderr)
             continue
-        stats.weights[stripe].append(np.asarray(weights, float))
+        if record:
+            stats.weights[stripe].append(np.asarray(weights, float))
         uv = centres_to_pixels(centres, stripe)
         ok = np.all(np.isfinite(uv), axis=1)
         uv = uv[ok]

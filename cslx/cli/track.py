@@ -1,4 +1,4 @@
-"""Track a weld from a camera, a video file or a directory of PNG frames, and drive the robot.
+"""Track a weld from a camera, a video file or a directory of frames, and drive the robot.
 
 Each frame goes through the runtime's per-frame loop (`cslx.runtime.loop.TrackingLoop`: the
 compiled tracker, the path controller and, unless --dry-run, the serial link to the robot,
@@ -14,7 +14,7 @@ Ctrl-C, SIGTERM and SIGHUP send STOP to the robot and close the port and the log
 (exit 130, 143, 129); during the compile they end the command at once with a message.
 
 Time: in a dry run the frames' own timestamps (video position, a camera's grab time, or
-frame index / --fps for a PNG directory); with a robot the measured time, since the robot
+frame index / --fps for a directory of frames); with a robot the measured time, since the robot
 moves in real time. Odometry comes from the robot's telemetry when connected, else the
 nominal speed (`cslx.config.Motion`).
 
@@ -36,7 +36,7 @@ import time
 from ..config import MOTION
 
 NAME = "track"
-HELP = "track the weld in a camera/video/PNG directory and drive the robot over serial"
+HELP = "track the weld in a camera/video/image directory and drive the robot over serial"
 
 #: Exit status of each signal that stops the command (128 + signal number).
 _SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
@@ -46,7 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--source",
         required=True,
-        help="camera index (0, 1, …), a video file, or a directory of PNG frames (sorted)",
+        help="camera index (0, 1, …), a video file, or a directory of frames (PNG, JPEG, BMP, "
+        "TIFF; sorted by name)",
     )
     parser.add_argument("--calib", required=True, metavar="FILE", help="calibration JSON")
     link = parser.add_mutually_exclusive_group()
@@ -64,7 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fps",
         type=float,
         default=MOTION.fps,
-        help=f"frame rate of PNG directories, and of videos without one ({MOTION.fps:g})",
+        help=f"frame rate of frame directories, and of videos without one ({MOTION.fps:g})",
     )
     parser.add_argument("--jax-cache", metavar="DIR", help="JAX persistent compilation cache")
 
@@ -82,7 +83,7 @@ def _raise_stop(signum, _frame):
 
 
 class _Source:
-    """Frames with timestamps: (name, rgb or None, t s or None) from OpenCV or a PNG folder.
+    """Frames with timestamps: (name, rgb or None, t s or None) from OpenCV or an image folder.
 
     A video must give a first frame (else OSError: not a video OpenCV can read). A video
     that ends before its header's frame count, or fails mid-way, yields its missing frames
@@ -100,12 +101,14 @@ class _Source:
         self.read = self.lost = 0
         self._first = None
         if os.path.isdir(spec):
-            names = sorted(f for f in os.listdir(spec) if f.lower().endswith(".png"))
-            if not names:
-                raise OSError(f"{spec}: no PNG frames in this directory")
-            self.files = [os.path.join(spec, f) for f in names]
+            from ..images import IMAGE_EXTENSIONS, list_images
+
+            self.files = list_images(spec)
+            if not self.files:
+                kinds = ", ".join(IMAGE_EXTENSIONS)
+                raise OSError(f"{spec}: no image frames ({kinds}) in this directory")
             self.kind = "dir"
-            self.expected = len(names)
+            self.expected = len(self.files)
             return
         target = int(spec) if spec.isdigit() else spec
         if isinstance(target, str):
@@ -133,9 +136,13 @@ class _Source:
     def __iter__(self):
         cv2 = self.cv2
         if self.files is not None:
+            from ..images import read_rgb
+
             for i, path in enumerate(self.files):
-                bgr = cv2.imread(path, cv2.IMREAD_COLOR)
-                rgb = None if bgr is None else cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+                try:  # gray, alpha, 16-bit and EXIF-rotated frames as 8-bit RGB
+                    rgb = read_rgb(path)
+                except OSError:  # unreadable or truncated: the frame's row says "no frame"
+                    rgb = None
                 self.read += rgb is not None
                 self.lost += rgb is None
                 yield os.path.basename(path), rgb, i / self.fps

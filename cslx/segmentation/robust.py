@@ -387,7 +387,8 @@ def linked_extract(
     """Centres of one stripe by the robust method (module docstring).
 
     Args:
-        image: (H, W, 3) RGB frame (8-bit scale for the clipping test) or (H, W) monochrome.
+        image: (H, W, 3) RGB frame (8-bit scale for the clipping test; a uint16 frame, as
+            a 16-bit file holds it, is brought to that scale by / 257) or (H, W) monochrome.
         space: colour space ("auto": clip-aware kurtosis search; a name or weights).
         stripe: "h" or "v".
         sigma: fixed Steger scale (px); None chooses it from the measured width.
@@ -405,7 +406,9 @@ def linked_extract(
     image = jnp.asarray(image)
     if image.ndim == 3 and image.shape[-1] == 3:
         if not jnp.issubdtype(image.dtype, jnp.floating):
+            wide = image.dtype == jnp.uint16  # else every pixel would count as clipped
             image = image.astype(jnp.result_type(float))
+            image = image / 257.0 if wide else image
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)

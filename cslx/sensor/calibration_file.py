@@ -60,6 +60,14 @@ def validate_calibration(data: Any, path: str = "<calibration>") -> dict[str, np
         raise CalibrationError(f"{path}: 'K' focal lengths must be positive")
     if not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
         raise CalibrationError(f"{path}: 'K' must be [[fx,0,u0],[0,fy,v0],[0,0,1]]")
+    d = data.get("dist")
+    d = d[0] if isinstance(d, list) and len(d) == 1 and isinstance(d[0], list) else d
+    if isinstance(d, list) and len(d) == 5:  # OpenCV's default output, (1, 5) or (5,)
+        raise CalibrationError(
+            f"{path}: 'dist' must be [k1, k2, p1, p2], got 5 numbers (OpenCV's k1, k2, p1, p2, "
+            "k3?): cslx's lens model has no k3 (docs/contracts.md); calibrate with k3 fixed at "
+            "0 (cv2.CALIB_FIX_K3) or with `cslx calibrate`"
+        )
     dist = _array(data, "dist", (4,), path)
     if "planes" not in data:
         if data.get("camera_only"):

@@ -36,10 +36,17 @@ def test_extract_med_bands_in_order_with_a_failed_image(tmp_path, capsys, monkey
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"not a png")
     paths.insert(1, str(bad))
+    # a monochrome camera's frame between them: full-frame MED in its gray values (R − G
+    # would be zero), its rows between the band batches' rows
+    gray = tmp_path / "gray.png"
+    cv2.imwrite(str(gray), cv2.imread(paths[-1])[..., 2])
+    truth[str(gray)] = truth[paths[-1]]
+    paths.insert(3, str(gray))
     out = tmp_path / "c.csv"
     assert main(["extract", *paths, "--method", "med", "--out", str(out)]) == 1
     err = capsys.readouterr().err
-    assert f"{bad}: not a readable image; skipped" in err and "3 of 4 images" in err
+    assert f"{bad}: not a readable image; skipped" in err and "4 of 5 images" in err
+    assert "1 of 5 images are grayscale" in err
     rows = list(csv.DictReader(out.open()))
     order = list(dict.fromkeys(r["image"] for r in rows))
     assert order == [p for p in paths if p != str(bad)]

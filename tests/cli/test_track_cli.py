@@ -128,7 +128,7 @@ def test_bad_sources_and_calibration(data, tmp_path, capsys):
     cases = [
         (["--source", str(text), "--calib", calib], "not a video"),
         (["--source", str(tmp_path / "nope.mp4"), "--calib", calib], "no such video"),
-        (["--source", str(tmp_path), "--calib", calib], "no PNG frames"),
+        (["--source", str(tmp_path), "--calib", calib], "no image frames"),
         (["--source", str(data["folder"]), "--calib", str(tmp_path)], "is a directory"),
         (["--source", str(data["folder"]), "--calib", str(text)], "notes.txt"),
     ]

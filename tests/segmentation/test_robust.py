@@ -96,6 +96,11 @@ def test_stretch_hidden_by_a_clipped_crossing_is_bridged_and_flagged():
     far = np.abs(np.arange(W) - 110) > 30
     assert np.isfinite(pos[far]).mean() > 0.95
     assert np.nanmedian(np.abs(pos[far] - v_true[far])) < 0.1
+    # The same frame as a 16-bit file holds it: the same centres and clipped flags (a uint16
+    # frame was taken as 8-bit, every pixel above the clip level, and gave no centre at all).
+    c16 = extract(rgb.astype(np.uint16) * 257, "linked", space="r-g", stripe="h")
+    np.testing.assert_allclose(np.asarray(c16.pos), pos, atol=1e-4)
+    assert np.array_equal(np.asarray(c16.saturated), sat)
 
 
 def test_moment_grid_scores_equal_the_direct_search():

@@ -104,6 +104,9 @@ def _corrupt(tmp_path, mutate):
     [
         (lambda d: d.pop("K"), "missing key 'K'"),
         (lambda d: d.__setitem__("dist", [0.1, 0.2]), "'dist' must have shape"),
+        # OpenCV's calibrateCamera writes five coefficients, k3 last
+        (lambda d: d.__setitem__("dist", [[-0.29, 0.1, 0.001, 0.0, 0.02]]), "no k3.*FIX_K3"),
+        (lambda d: d.__setitem__("dist", [-0.29, 0.1, 0.001, 0.0, 0.0]), "no k3"),
         (lambda d: d.__setitem__("T_cr", [0.0, float("nan"), 1.0]), "non-finite"),
         (lambda d: d.__setitem__("planes", [[0, 0, 0], [0.01, 0, 0.004]]), "zero normal"),
         (lambda d: d.__setitem__("planes", [[5.0, 0, 0], [0.01, 0, 0.004]]), "camera centre"),
