@@ -173,10 +173,12 @@ def band_image(
     starts = (o0, zero, zero) if axis == 0 else (zero, o0, zero)
     shape = list(rgb.shape)
     shape[axis] = outer
-    # the cut as its own buffer, not fused into its consumers (module notes)
-    sub = one_function(
-        lambda o, x, s: lax.dynamic_slice(x, s, shape), o0.astype(dtype), rgb, starts
-    )
+    if outer == n:  # the whole frame along the axis (o0 is 0)
+        sub = rgb
+    else:  # the cut as its own buffer, not fused into its consumers (module notes)
+        sub = one_function(
+            lambda o, x, s: lax.dynamic_slice(x, s, shape), o0.astype(dtype), rgb, starts
+        )
     if not fill:
         return _sub_band(colour_sum(sub, weights, dtype), start - o0, size, axis)
     if axis == 1:
