@@ -59,6 +59,16 @@ transposed, rather than computed from the transposed uint8 cut: that band's colo
 mask 0.25 → 0.19 ms alone (400 interleaved calls), the tracking frame 3.83 → 3.79,
 3.52 → 3.45 and 2.69 → 2.66 ms median (`experiments.ab_tracking --rev` the cut above, 400,
 500 and 600 interleaved frames, load 2.4–4.9); small, but in every run; identical outputs.
+Both together against the fused cut (`experiments.ab_tracking --rev main`, load 4.4–5.1,
+identical outputs): the tracking frame with band MED 3.41 → 3.16 ms median (600
+interleaved frames), the tracker's configuration on video seed 555 2.90 → 2.65 ms
+(``--program tracking --seed 555``, 400) and `Tracker.step` 3.10 → 2.73 ms
+(``--program tracker``, 400). Not kept: ``jnp.any`` of the mask as one uint8 maximum of
+the cut (XLA runs the boolean reduction as ``reduce-window`` kernels; alone, before the
+cut's loop, the frame went 4.48 → 4.44 ms, 300 interleaved frames: noise), the cut as
+the output of a `lax.cond` rather than a loop (the same time, 3.91 ms both), and
+`frame_stats`'s sums as exact integer sums (0.140 → 0.073 ms alone, but the frame
+3.18 → 3.28 ms, 400 interleaved frames: it runs beside the bands).
 """
 
 from __future__ import annotations
