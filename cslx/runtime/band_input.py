@@ -43,6 +43,34 @@ the pipeline chooses with `lax.cond`: band cuts h 0.93 → 0.83 ms, v 1.24 → 1
 interleaved calls, load 7.5–8.7); cut + MED + Steger of both bands 6.70 → 5.83 ms (300,
 load 8.3–8.5); the tracking call 10.20 → 9.37 ms (300 interleaved frames,
 `experiments.ab_tracking`, load 8.7–10.9); identical outputs.
+
+The cut as its own buffer (issue 13). XLA fused the band's `lax.dynamic_slice` of the frame
+into each of its consumers (the colour sum, the clipped mask), and an elementwise kernel
+reading through a dynamic slice ran ≈ 4× slower than through a static one (the colour sum
+and mask of the 114×640 band of rows 0.21 against 0.05 ms, of both bands 0.54 against
+0.21 ms; 400 interleaved calls, load 4–5). `band_image` now cuts the uint8 band in a loop
+of one trip (`cslx.runtime.small_ops.one_function`), whose output is a plain buffer the
+consumers read: both bands' colour sum and mask 0.49 → 0.24 ms, and the tracking frame
+3.80 → 3.11 ms and 3.26 → 2.98 ms median (`experiments.ab_tracking --rev main`, 300 and
+400 interleaved frames, load 4.3–5.1); identical outputs. The band of columns' transpose
+stays with the consumers (inside the loop as well: 0.21 → 0.24 ms). Its colour image and
+mask are taken on the cut as it lies (contiguous reads of the three channels) and then
+transposed, rather than computed from the transposed uint8 cut: that band's colour sum and
+mask 0.25 → 0.19 ms alone (400 interleaved calls), the tracking frame 3.83 → 3.79,
+3.52 → 3.45 and 2.69 → 2.66 ms median (`experiments.ab_tracking --rev` the cut above, 400,
+500 and 600 interleaved frames, load 2.4–4.9); small, but in every run; identical outputs.
+Both together against the fused cut (`experiments.ab_tracking --rev main`, load 4.4–5.1,
+identical outputs): the tracking frame with band MED 3.41 → 3.16 ms median (600
+interleaved frames), the tracker's configuration on video seed 555 2.90 → 2.65 ms
+(``--program tracking --seed 555``, 400) and `Tracker.step` 3.10 → 2.73 ms
+(``--program tracker``, 400). Not kept: ``jnp.any`` of the mask as one uint8 maximum of
+the cut (XLA runs the boolean reduction as ``reduce-window`` kernels; alone, before the
+cut's loop, the frame went 4.48 → 4.44 ms, 300 interleaved frames: noise), the cut as
+the output of a `lax.cond` rather than a loop (the same time, 3.91 ms both), and
+`frame_stats`'s sums as exact integer sums (0.140 → 0.073 ms alone, but the frame
+3.18 → 3.28 ms, 400 interleaved frames: it runs beside the bands), and the band of
+columns' colour image and mask passed to the fill's loop as they lie, transposed inside
+it (the frame 3.02 → 3.18 ms, 400 interleaved frames, load 4.7–5.1).
 """
 
 from __future__ import annotations
@@ -157,7 +185,12 @@ def band_image(
     starts = (o0, zero, zero) if axis == 0 else (zero, o0, zero)
     shape = list(rgb.shape)
     shape[axis] = outer
-    sub = lax.dynamic_slice(rgb, starts, shape)
+    if outer == n:  # the whole frame along the axis (o0 is 0)
+        sub = rgb
+    else:  # the cut as its own buffer, not fused into its consumers (module notes)
+        sub = one_function(
+            lambda o, x, s: lax.dynamic_slice(x, s, shape), o0.astype(dtype), rgb, starts
+        )
     if not fill:
         return _sub_band(colour_sum(sub, weights, dtype), start - o0, size, axis)
     if axis == 1:
@@ -166,10 +199,15 @@ def band_image(
         # the fill's four flank arrays (the same values; 480×128 band 2.04 → 1.38 ms,
         # 400 interleaved calls, load 6, issue 13).
         # the fill along the transposed band's axis 0 is the frame's axis 1: swap the heights
+        # The colour image and the mask are taken on the cut as it lies and transposed
+        # (module notes).
+        I = colour_sum(sub, weights, dtype).T
+        clip = clipped_mask(sub).T
         sub = jnp.transpose(sub, (1, 0, 2))
         dome = (dome[1], dome[0], *dome[2:]) if dome else dome
-    I = colour_sum(sub, weights, dtype)
-    clip = clipped_mask(sub)
+    else:
+        I = colour_sum(sub, weights, dtype)
+        clip = clipped_mask(sub)
 
     def cut(x):
         return _sub_band(x, start - o0, size, 0)
