@@ -127,8 +127,15 @@ class PipelineConfig(eqx.Module):
     roi_lag_stride: the lagged band step's statistics and fixed-point step on every k-th pair
         of segments (columns of the row band, rows of the column band; `cslx.segmentation.med.med`
         ``lag_stride``: slices of the band's spectra, no FFT of their own); the band is still
-        filtered whole. 2 (default): the step's inverse FFT, its cubes' FFTs and the
-        statistics run on half the band (the reported kurtosis is that of those segments).
+        filtered whole. 4 (default, since 5 Dec; 2 before): the step's inverse FFT, its
+        cubes' FFTs and the statistics run on a quarter of the band (the reported kurtosis
+        is that of those segments). Once the band cut and the weld features got faster
+        (issue 13), 4 paid: tracking mode 2.60 → 2.50 and 2.84 → 2.75 ms (8: 2.71), 400
+        frames each, calls interleaved, quiet machine (load 1.1–1.3; `experiments/lag_stride.py`);
+        band − full-frame MED centres over 8 carried tracking frames × 2 stripes, worst
+        |median|, sunny video dev seeds 0 / 1 / 555: 0.0204 / 0.0110 / 0.0086 px with 2,
+        0.0204 / 0.0107 / 0.0087 with 4 (8: 0.0204 / 0.0103 / 0.0080); median |centre −
+        truth| 0.0970 / 0.1087 / 0.1052 → 0.0972 / 0.1097 / 0.1049 px. When 2 became default:
         Issue 13, tracking mode (experiments.ab_tracking against 1, interleaved frames):
         median 4.02 → 3.73 ms, p10 3.34 → 3.13 (500, load 1.5–1.7); 4.09 → 3.87, p10 3.39 →
         3.24 (600, load 6); band MED alone (800 interleaved calls, load 6) 64×640 0.416 →
@@ -200,7 +207,7 @@ class PipelineConfig(eqx.Module):
     max_steps: int = eqx.field(static=True, default=30)
     roi_max_steps: int = eqx.field(static=True, default=2)
     roi_med_lag: bool = eqx.field(static=True, default=True)
-    roi_lag_stride: int = eqx.field(static=True, default=2)
+    roi_lag_stride: int = eqx.field(static=True, default=4)
     tol: float = eqx.field(static=True, default=1e-2)
     sigma: float = eqx.field(static=True, default=2.0)
     threshold: float = eqx.field(static=True, default=0.1)
