@@ -260,3 +260,27 @@ def mono(image, space) -> np.ndarray:
     return np.asarray(
         monochrome_for(image, SPACES.get(space, space) if isinstance(space, str) else space)[0]
     )
+
+
+def second_pass_inputs(image, stripe: str):
+    """``(centres, inputs)``: `cslx.segmentation.extract` (method "linked") of one frame and
+    stripe, and what its second pass (`cslx.segmentation.robust.second_pass`) was given: the
+    monochrome image, the first pass's ``pos`` / ``valid`` / ``bridged`` / ``clipped``, and
+    its ``sigma`` and ``axis``. For the diagnosis scripts that re-run the second pass's
+    stages (`experiments.toe_leak`, `experiments.plate_speckle`)."""
+    from cslx import segmentation as seg
+    from cslx.segmentation import robust
+
+    seen = {}
+    real = robust.second_pass
+
+    def spy(mono, pos, valid, bridged, clipped=None, **kw):
+        seen.update(mono=mono, pos=pos, valid=valid, bridged=bridged, clipped=clipped, **kw)
+        return real(mono, pos, valid, bridged, clipped, **kw)
+
+    robust.second_pass = spy
+    try:
+        centres = seg.extract(image, "linked", stripe=stripe)
+    finally:
+        robust.second_pass = real
+    return centres, seen

@@ -104,16 +104,11 @@ from experiments.tracking_sequences import NUISANCES, PLACEMENTS, make_sequence,
 def run(tracker, seq: dict) -> dict[str, np.ndarray]:
     """Per frame: e_meas, e_off, confidence, and the bead's longest point-free stretch (mm)
     on each side of the true centre (within half the true width)."""
-    from experiments.tracking_diagnostics import _recording
+    from experiments.tracking_diagnostics import replay
 
-    seen, refresh = _recording(tracker)
-    tracker.reset()
     w0 = float(seq["sizes"][0])
     rows, obs = [], []
-    for i, frame in enumerate(seq["frames"]):
-        odo = (float(seq["odo_d"][i]), float(seq["odo_delta"][i])) if i else None
-        refresh()
-        o = tracker.step(frame, dt=0.05, odometry=odo)
+    for i, o, seen in replay(tracker, seq):
         obs.append(o)
         r = o.raw
         th = math.radians(seq["heading_deg"][i])

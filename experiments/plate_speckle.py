@@ -98,26 +98,17 @@ def stages(image, stripe: str) -> dict[str, np.ndarray]:
     import math
 
     from cslx import segmentation as seg
-    from cslx.segmentation import refine, robust
+    from cslx.segmentation import refine
     from cslx.segmentation.profile import fit_centres
     from cslx.segmentation.ridges import noise_std
+    from experiments.common import second_pass_inputs
 
-    seen = {}
-    real = robust.second_pass
-
-    def spy(mono, pos, valid, bridged, clipped=None, **kw):
-        seen.update(mono=mono, pos=pos, valid=valid, bridged=bridged, clipped=clipped, kw=kw)
-        return real(mono, pos, valid, bridged, clipped, **kw)
-
-    robust.second_pass = spy
-    try:
-        uv = seg.centres_to_pixels(seg.extract(image, "linked", stripe=stripe), stripe)
-    finally:
-        robust.second_pass = real
+    centres, seen = second_pass_inputs(image, stripe)
+    uv = seg.centres_to_pixels(centres, stripe)
     mono, pos, valid, bridged, clipped = (
         seen[k] for k in ("mono", "pos", "valid", "bridged", "clipped")
     )
-    sigma, axis = seen["kw"]["sigma"], seen["kw"]["axis"]
+    sigma, axis = seen["sigma"], seen["axis"]
     use = valid & ~bridged
     out = {}
     for name, sa in (("raw", 0.0), ("re6", refine.SIGMA_REFINE)):

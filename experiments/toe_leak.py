@@ -36,25 +36,14 @@ def stages(image, stripe: str, t: np.ndarray) -> dict[str, np.ndarray]:
     """Centres of every stage (module docstring) of one frame and stripe."""
     import jax.numpy as jnp
 
-    from cslx import segmentation as seg
     from cslx.segmentation import refine, robust
+    from experiments.common import second_pass_inputs
 
-    seen = {}
-    real = robust.second_pass
-
-    def spy(mono, pos, valid, bridged, clipped=None, **kw):
-        seen.update(mono=mono, pos=pos, valid=valid, bridged=bridged, clipped=clipped, kw=kw)
-        return real(mono, pos, valid, bridged, clipped, **kw)
-
-    robust.second_pass = spy
-    try:
-        seg.extract(image, "linked", stripe=stripe)
-    finally:
-        robust.second_pass = real
+    _, seen = second_pass_inputs(image, stripe)
     mono, pos, valid, bridged, clipped = (
         seen[k] for k in ("mono", "pos", "valid", "bridged", "clipped")
     )
-    sigma, axis = seen["kw"]["sigma"], seen["kw"]["axis"]
+    sigma, axis = seen["sigma"], seen["axis"]
     use = valid & ~bridged
     truth = jnp.asarray(np.where(np.isfinite(t), t, np.nan_to_num(np.asarray(pos))), pos.dtype)
     out = {"first": np.asarray(pos)}
@@ -62,7 +51,7 @@ def stages(image, stripe: str, t: np.ndarray) -> dict[str, np.ndarray]:
         for sa in (0.0, refine.SIGMA_REFINE):
             r, _ = refine.refine_centres(mono, ref, use, sigma=sigma, sigma_along=sa, axis=axis)
             out[f"re_{name}_{0 if sa == 0 else 6}"] = np.asarray(r)
-        final = real(mono, ref, valid, bridged, clipped, sigma=sigma, axis=axis)
+        final = robust.second_pass(mono, ref, valid, bridged, clipped, sigma=sigma, axis=axis)
         out[f"final_{name}"] = np.asarray(final)
     out["valid"] = np.asarray(use)
     return out

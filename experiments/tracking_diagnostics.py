@@ -367,6 +367,17 @@ def _recording(tracker):
     return seen, refresh
 
 
+def replay(tracker, seq: dict):
+    """Step ``tracker`` (reset first) over a sequence with its odometry at 20 fps: yields
+    (frame index, `Observation`, the frame's recorded profiles ``points_h`` / ``points_v``)."""
+    seen, refresh = _recording(tracker)
+    tracker.reset()
+    for i, frame in enumerate(seq["frames"]):
+        odo = (float(seq["odo_d"][i]), float(seq["odo_delta"][i])) if i else None
+        refresh()
+        yield i, tracker.step(frame, dt=0.05, odometry=odo), seen
+
+
 def _share_pipeline(tracker, memo: dict) -> None:
     """Make the tracker's compiled steps look their outputs up in `memo` (frame, program)."""
     import hashlib
@@ -387,14 +398,8 @@ def _share_pipeline(tracker, memo: dict) -> None:
 
 def diagnose(tracker, seq: dict, worst: int = 5, verbose: bool = True) -> dict:
     """Run one sequence; per-frame table of the worst frames and a summary dict."""
-    seen, refresh = _recording(tracker)
-    tracker.reset()
-    refresh()
     rows, obs = [], []
-    for i, frame in enumerate(seq["frames"]):
-        odo = (float(seq["odo_d"][i]), float(seq["odo_delta"][i])) if i else None
-        refresh()
-        o = tracker.step(frame, dt=0.05, odometry=odo)
+    for i, o, seen in replay(tracker, seq):
         obs.append(o)
         r = o.raw
         y0, th, xs = seq["offset_mm"][i], math.radians(seq["heading_deg"][i]), seq["stripe_x_mm"][i]

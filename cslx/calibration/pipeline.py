@@ -27,7 +27,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from ..images import truncation_problem
+from ..images import read_rgb
 from ..sensor.rig import CalibrationError, Sensor, sensor_from_arrays
 from .camera import CameraCalibration, calibrate_camera
 from .corners import board_points, detect_corners
@@ -41,23 +41,15 @@ def read_image(image) -> np.ndarray:
     """A path or an array → (H, W, 3) uint8 RGB (or (H, W) gray kept as is).
 
     Raises:
-        OSError: the path is a directory, missing, or not an image OpenCV can read.
+        OSError: the path is a directory, missing, truncated or not an image OpenCV can read
+            (`cslx.images.read_rgb`; the message starts with the path).
     """
-    import cv2
-
     if isinstance(image, str | os.PathLike):
         path = os.fspath(image)
-        if os.path.isdir(path):
-            raise IsADirectoryError(f"{path}: is a directory, not an image")
-        if not os.path.exists(path):
-            raise FileNotFoundError(f"{path}: no such file")
-        why = truncation_problem(path)
-        if why:
-            raise OSError(f"{path}: {why}")
-        bgr = cv2.imread(path, cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise OSError(f"{path}: not an image OpenCV can read")
-        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        try:
+            return read_rgb(path)
+        except OSError as e:  # FileNotFoundError, IsADirectoryError, OSError: with the path
+            raise type(e)(f"{path}: {e}") from None
     img = np.asarray(image)
     if img.dtype != np.uint8 or img.ndim not in (2, 3):
         raise OSError(f"an image must be uint8 (H, W) or (H, W, 3), got {img.dtype} {img.shape}")

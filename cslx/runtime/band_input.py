@@ -188,6 +188,7 @@ def band_image(
     if outer == n:  # the whole frame along the axis (o0 is 0)
         sub = rgb
     else:  # the cut as its own buffer, not fused into its consumers (module notes)
+        # (`one_function`'s first argument must be a float array: its loop condition)
         sub = one_function(
             lambda o, x, s: lax.dynamic_slice(x, s, shape), o0.astype(dtype), rgb, starts
         )
