@@ -371,5 +371,5 @@ def tracking_config():
         edge_weight=0.0,
         edge_weight_ratio=0.5,
         edge_weight_gap=6,
-        weld=WeldConfig(junction_min_confidence=0.1, side_cover_power=2.0),
+        weld=WeldConfig(junction_min_confidence=0.1, side_cover_power=2.0, min_plate_mm=1.0),
     )
