@@ -327,6 +327,21 @@ What it showed on the development seeds (7301, 7302, 7305, 1201–1203; issue 12
   within 2 / 3 columns of a weighted run (Steger's window shares its light): frame 0
   measured 1.43 → 1.35 mm off, offset max 1.46 → 1.38 mm, heading 0.319 → 0.382 / 0.447°.
 
+- track12m (fresh seeds 7320–7322, 7326–7327, now development seeds; sunny and shadow,
+  both placements). Runs over the brief's flags (offset mean > 0.15 or max > 0.8 mm) at
+  07395bd: 7320 flank sunny 0.351 / 0.873 mm (T recall 86.7 %), 7320 flank shadow 0.164,
+  7320 beside sunny 0.179 / 0.900, 7320 beside shadow max 0.887, 7321 flank sunny 0.157,
+  7327 flank sunny 0.157 / 0.874. 7320 flank sunny: frames 23 / 25 / 40 measured the
+  bead 10–12 mm wide (18.5 true) and 2.4–3.5 mm off, where the vertical stripe crosses the
+  bead 0.5–2.6 mm from its centre: the horizontal stripe's centres there dive through the
+  plate's height (a point at +0.07 mm between −0.4 … −1.3 mm, one at −25.8 mm), the run
+  split and its larger half was fitted. Fixed by `WeldConfig.min_plate_mm` (on in the
+  tracker, the numbers in `cslx.runtime.pipeline_config.tracking_config`); 0.5 mm instead
+  of 1: 7320 flank sunny 0.176 mm (1 mm: 0.144). Left: 7320 beside sunny's max is frame 0
+  (−0.93 mm), whose sunlit flank (−3 … −9 mm from the centre) has no points at all (the
+  clipped plateau above), so the cap is placed by the other flank and the crown, 33 mm
+  wide; the filter starts from it.
+
     python -m experiments.tracking_diagnostics --seed 7301 [--seeds N] [--nuisance sunny]
         [--placement flank] [--worst 5]
 """

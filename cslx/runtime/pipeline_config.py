@@ -349,6 +349,32 @@ def tracking_config():
     0.297; shadow 0.087 / 0.220, 0.092 / 0.261 → 0.081 / 0.220, 0.086 / 0.261; sunny
     identical.
 
+    A bead run ends only at a stretch of plate points ≥ 1 mm long, and a point more than
+    `threshold_mm` below the plate is no plate point (`WeldConfig.min_plate_mm`,
+    `cslx.runtime.bead_run.plate_points`; issue 12, track12m): where the vertical stripe crosses
+    the bead (the flank placement) the horizontal stripe's centres dive through the plate's
+    height there in sun (fresh seed 7320 flank sunny frames 23 / 25 / 40: a point at plate
+    height between dips to −0.4 … −1.3 mm, one at −25.8 mm), the run split, and its larger half
+    was fitted: 10–12 mm wide for 18.5, 2.4–3.5 mm off; refitted with the rule, 19.4–20.0 mm
+    wide, 0.10–0.26 mm off. `experiments/tracking_diagnostics.py`, each run's variant against
+    the default in one process, offset mean / max mm, heading mean °, before → after. Fresh
+    seeds 7320–7322 (sunny and shadow, both placements; 7322 flank shadow not run) and 7326–7327
+    flank sunny: 7320 flank sunny 0.351 / 0.873 / 0.422 → 0.144 / 0.625 / 0.220, 7320 flank
+    shadow 0.164 / 0.665 → 0.128 / 0.665, 7327 flank sunny 0.157 / 0.874 → 0.094 / 0.856, 7320
+    beside sunny 0.179 / 0.900 → 0.170 / 0.900 (its max is frame 0, whose sunlit flank has no
+    points at all: not this), 7321 beside sunny 0.143 / 0.571 → 0.094 / 0.597, 7321 flank sunny
+    0.157 / 0.536 → 0.149 / 0.474; the other 7 within ±0.004 mm. Dev runs (32 of the 72: 7301,
+    7302, 7305 flank, every kind; 1201–1206 sunny, both placements; 1205 and 1206 glare /
+    shadow, both): 1205 flank sunny 0.177 / 0.622 / 0.346 → 0.126 / 0.622 / 0.149, 1206 flank
+    sunny 0.135 / 0.421 → 0.100 / 0.240, 1206 flank glare 0.114 → 0.100, 1202 flank sunny 0.122
+    → 0.093, 1201 beside sunny 0.143 / 0.447 → 0.115 / 0.563, 7305 flank glare 0.116 → 0.106
+    (max 1.46, frame 0, unchanged); worse: 7302 flank sunny 0.111 / 0.863 / 0.446 → 0.129 /
+    0.832 / 0.502 (its heading newly 0.002° over the goal; the same with 0.5 mm, so the points
+    below the plate, not the stretch length), 7305 flank sunny heading 0.403 → 0.456°, 1206
+    beside glare 0.262 → 0.372°, 1205 beside glare 0.071 / 0.235 → 0.078 / 0.275 mm; the others
+    within ±0.005 mm; T recall and false T identical in every run (the vertical stripe's
+    junction search is not changed).
+
     Not kept: the edge weight falling linearly from 1 at a step of 0.25 to 0 at 0.5
     (`PipelineConfig.edge_weight_ramp` 0.25; a step below 0.5 still biases the centre: 7305
     beside shadow frames 13 and 20, steps 0.35–0.45 under the flank facing the sunlit side,
@@ -371,5 +397,5 @@ def tracking_config():
         edge_weight=0.0,
         edge_weight_ratio=0.5,
         edge_weight_gap=6,
-        weld=WeldConfig(junction_min_confidence=0.1, side_cover_power=2.0),
+        weld=WeldConfig(junction_min_confidence=0.1, side_cover_power=2.0, min_plate_mm=1.0),
     )

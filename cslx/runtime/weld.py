@@ -14,7 +14,9 @@ module is cslx's own, in five steps per stripe (all fixed-size, jit/vmap-able):
 3. **Bead** — a run of points with h above `threshold_mm` (~0.3 mm), bounded on both sides
    by plate points (a run that touches an end of the profile is only part of a bead, or a
    stripe lying along a bead, and is not reported); invalid points inside a run (glints,
-   dropouts) do not break it. Of the runs, the one with the largest area Σh is the bead.
+   dropouts) do not break it, nor, with `WeldConfig.min_plate_mm`, points far below the
+   plate or a plate stretch shorter than that (`cslx.runtime.bead_run.plate_points`). Of
+   the runs, the one with the largest area Σh is the bead.
 4. **Cap** — a circle fitted to the run (algebraic Kåsa fit, then Gauss–Newton on the
    geometric distance). Width = the chord where the circle meets the plate (h = 0), so the
    toes below the threshold are extrapolated; height (reinforcement) = the circle's apex;
@@ -54,6 +56,8 @@ import jax
 import jax.numpy as jnp
 
 from ..pytree import pytree_dataclass, static
+from .bead_run import largest_run as _largest_run
+from .bead_run import plate_points
 from .small_ops import masked_median, one_function, solve_spd
 from .vertical_heading import heading_from_vertical
 
@@ -101,6 +105,10 @@ class WeldConfig:
         to its half-chord + `cap_margin_mm` (`_side_cover`): a bead one of whose flanks the
         pipeline weighted out is placed by the other alone. 0 (off) here; 2 in the tracker's
         pipeline (`cslx.runtime.pipeline_config.tracking_config`, the evidence there).
+    min_plate_mm: > 0: a bead run ends only at a stretch of plate points this long, and a
+        point below the plate by more than `threshold_mm` is no plate point
+        (`cslx.runtime.bead_run.plate_points`); 0 (off) here, the tracker's in
+        `tracking_config`.
     """
 
     threshold_mm: float = 0.3
@@ -121,6 +129,7 @@ class WeldConfig:
     crossing_background_mm: float = 12.0
     n_cap: int = static(8)
     side_cover_power: float = static(0.0)
+    min_plate_mm: float = static(0.0)
 
 
 class WeldFeature(NamedTuple):
@@ -349,29 +358,6 @@ def _side_cover(t, valid, weights, t_c, p_cap, half0, config: WeldConfig):
     return jnp.where(hi > 0, lo / jnp.maximum(hi, 1e-6), 0.0) ** config.side_cover_power
 
 
-def _largest_run(h, above, below):
-    """(mask, area Σh) of the run of ``above`` points bounded by ``below`` points on both sides
-    (step 3 of the module docstring) with the largest area, the first of equal ones; where
-    none has an area > 0, the points above before the first point below (area 0).
-
-    The area of each point's run is C(next point below) − C(last point below) of the
-    cumulative area C, rather than a `segment_sum` over the runs, whose scatter keeps
-    `one_function` from compiling the bead's fit as one function (issue 13): the same run
-    as segment_sum's argmax, its area to float rounding (tests/runtime/test_weld.py).
-    """
-    n = h.shape[0]
-    idx = jnp.arange(n)
-    seg = jnp.cumsum(below.astype(jnp.int32))  # runs (and their plate point) by number
-    inside = above & (seg >= 1) & (seg < seg[-1])
-    C = jnp.cumsum(jnp.where(inside, h, 0.0))
-    last = jax.lax.cummax(jnp.where(below, idx, 0))
-    after = jax.lax.cummin(jnp.where(below, idx, n - 1), reverse=True)
-    area = jnp.where(inside, C[after] - C[last], 0.0)
-    top = jnp.argmax(area)
-    best = jnp.where(area[top] > 0, seg[top], 0)
-    return above & (seg == best), area[top]
-
-
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
@@ -432,7 +418,7 @@ def _bead(P, s, s_mean, q, *, valid, axis, config: WeldConfig, weights) -> WeldF
 
     # 3. runs above the threshold, delimited by valid plate points
     above = valid & (h > config.threshold_mm)
-    below = valid & ~above
+    below = plate_points(t, h, valid, above, config.threshold_mm, config.min_plate_mm)
     run, run_area = _largest_run(h, above, below)
     n_run = jnp.sum(run.astype(dtype))
 

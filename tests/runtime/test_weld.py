@@ -395,3 +395,43 @@ def test_side_cover_lowers_the_confidence_of_a_one_sided_bead():
     assert conf(on, clipped) == pytest.approx(conf(WeldConfig(), clipped), rel=1e-6)
     # off (0) by default: the weighted fit's confidence is unchanged
     assert conf(WeldConfig(side_cover_power=0.0), one_side) == conf(WeldConfig(), one_side)
+
+
+def test_dip_inside_the_bead_does_not_split_it():
+    """Centres pulled through the plate's height inside a bead (where the other stripe
+    crosses it, issue 12) split the run at its default: the larger part is fitted, narrow
+    and off-centre. With `WeldConfig.min_plate_mm` only a plate stretch that long ends a
+    run, and points well below the plate are no plate: the whole bead is found."""
+    from cslx.runtime.bead_run import largest_run, plate_points
+
+    rng = np.random.default_rng(12)
+    centre, width, height = 4.0, 18.0, 1.8
+    pts, valid, _ = horizontal_profile(rng, centre, width, 1e-3, glint=False, drop=0.0, noise=0.02)
+    y = pts[:, 1]
+    d = y - centre
+    # a bell-shaped bead (not a circle, so that its larger part alone misplaces it)
+    pts[:, 2] += np.where(np.abs(d) < width / 2, height * np.cos(np.pi * d / width) ** 2, 0.0)
+    base = PLATE["z0"] + PLATE["gx"] * pts[:, 0] + PLATE["gy"] * y
+    # a dip 2.5 mm off the centre: 5 columns 1 mm below the plate, one at its height
+    i0 = int(np.argmin(np.abs(d + 2.5)))
+    pts[i0 : i0 + 5, 2] = base[i0 : i0 + 5] - 1.0
+    pts[i0 + 5, 2] = base[i0 + 5] + 0.05
+    args = jnp.asarray(pts, jnp.float32), jnp.asarray(valid)
+    whole = feature(*args, 1, WeldConfig(min_plate_mm=1.0))
+    assert abs(float(whole.position) - centre) < 0.3
+    # the run: split in two by the dip at the default, one bead with the rule
+    h = jnp.asarray(pts[:, 2] - base, jnp.float32)
+    ok = jnp.asarray(valid)
+    above = ok & (h > 0.3)
+    t = jnp.asarray(y, jnp.float32)
+    split, _ = largest_run(h, above, plate_points(t, h, ok, above, 0.3, 0.0))
+    assert 0 < np.sum(np.asarray(split)) < 0.8 * np.sum(np.asarray(above))
+    below = plate_points(t, h, ok, above, 0.3, 1.0)
+    run, _ = largest_run(h, above, below)
+    assert np.array_equal(np.asarray(run), np.asarray(above))
+    assert not np.any(np.asarray(below)[i0 : i0 + 6])
+    # a clean bead is found the same with or without the rule
+    pts, valid, _ = horizontal_profile(rng, centre, width, height, glint=True)
+    args = jnp.asarray(pts, jnp.float32), jnp.asarray(valid)
+    a, b = feature(*args, 1, WeldConfig()), feature(*args, 1, WeldConfig(min_plate_mm=1.0))
+    np.testing.assert_allclose(float(a.position), float(b.position), atol=1e-4)

@@ -1,0 +1,82 @@
+"""The bead's run on one stripe's profile: which points delimit it, and the largest run.
+
+Step 3 of `cslx.runtime.weld` (module docstring there): a bead is a run of points above the
+plate, bounded on both sides by plate points. `plate_points` says which points count as
+the plate there, `largest_run` picks the run. Fixed-size, jit/vmap-able, no scatter (so
+that `cslx.runtime.small_ops.one_function` compiles the bead's fit as one function).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+
+if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
+    from jaxtyping import Array, Bool, Float
+
+__all__ = ["largest_run", "plate_points"]
+
+
+def plate_points(
+    t: Float[Array, " n"],
+    h: Float[Array, " n"],
+    valid: Bool[Array, " n"],
+    above: Bool[Array, " n"],
+    threshold_mm: float,
+    min_plate_mm: float,
+) -> Bool[Array, " n"]:
+    """The points that delimit a bead run: valid points not above the threshold that lie on
+    the plate, in a stretch of such points at least ``min_plate_mm`` long (``t``, along the
+    plate, from its first to its last point; invalid and rejected points inside a stretch do
+    not end it, points above do), or reaching an end of the profile.
+
+    A point more than ``threshold_mm`` below the plate line is not plate (no bead's interior
+    and no plate lies there: a stripe centre pulled off its ridge, e.g. where the other
+    stripe crosses the bead); like an invalid point it neither joins nor ends a run. A short
+    stretch of points at plate height between two parts of a bead (such a centre passing
+    through the plate's height) does not end the run either: a bead split there was fitted
+    as its larger half, narrow and off-centre by a quarter of its width (issue 12, fresh
+    seed 7320 flank sunny: beads 10.2 / 12.2 mm wide for 18.5, 3.5 / 2.4 mm off).
+
+    ``min_plate_mm`` ≤ 0: every valid point not above is plate (no test on its height).
+    """
+    plate = valid & ~above
+    if min_plate_mm <= 0:
+        return plate
+    n = h.shape[0]
+    idx = jnp.arange(n)
+    plate = plate & (h >= -threshold_mm)
+    last_up = jax.lax.cummax(jnp.where(above, idx, -1))
+    next_up = jax.lax.cummin(jnp.where(above, idx, n), reverse=True)
+    first_p = jax.lax.cummin(jnp.where(plate, idx, n), reverse=True)
+    last_p = jax.lax.cummax(jnp.where(plate, idx, -1))
+    i0 = first_p[jnp.clip(last_up + 1, 0, n - 1)]  # the stretch's first plate point
+    i1 = last_p[jnp.clip(next_up - 1, 0, n - 1)]  # and its last
+    extent = jnp.abs(t[jnp.clip(i1, 0, n - 1)] - t[jnp.clip(i0, 0, n - 1)])
+    open_end = (last_up < 0) | (next_up >= n)
+    return plate & (open_end | (extent >= min_plate_mm))
+
+
+def largest_run(h, above, below):
+    """(mask, area Σh) of the run of ``above`` points bounded by ``below`` points on both sides
+    (step 3 of `cslx.runtime.weld`) with the largest area, the first of equal ones; where
+    none has an area > 0, the points above before the first point below (area 0).
+
+    The area of each point's run is C(next point below) − C(last point below) of the
+    cumulative area C, rather than a `segment_sum` over the runs, whose scatter keeps
+    `one_function` from compiling the bead's fit as one function (issue 13): the same run
+    as segment_sum's argmax, its area to float rounding (tests/runtime/test_weld.py).
+    """
+    n = h.shape[0]
+    idx = jnp.arange(n)
+    seg = jnp.cumsum(below.astype(jnp.int32))  # runs (and their plate point) by number
+    inside = above & (seg >= 1) & (seg < seg[-1])
+    C = jnp.cumsum(jnp.where(inside, h, 0.0))
+    last = jax.lax.cummax(jnp.where(below, idx, 0))
+    after = jax.lax.cummin(jnp.where(below, idx, n - 1), reverse=True)
+    area = jnp.where(inside, C[after] - C[last], 0.0)
+    top = jnp.argmax(area)
+    best = jnp.where(area[top] > 0, seg[top], 0)
+    return above & (seg == best), area[top]
