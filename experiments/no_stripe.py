@@ -207,6 +207,29 @@ def dump_or_compare(path: str, compare: bool, frames, seed, table6_seed, table6_
     return counts
 
 
+def time_test(calls: int = 200) -> dict:
+    """Warm wall time (µs, median) of the no-stripe test on one 640-column stripe."""
+    import jax
+
+    from cslx.segmentation import presence
+
+    rng = np.random.default_rng(0)
+    n = 640
+    arrays = (
+        rng.normal(200, 1, n),
+        np.ones(n, bool),
+        np.full(n, 0.08),
+        np.full(n, 60.0),
+        np.zeros(n, bool),
+    )
+
+    def run(a):
+        return jax.block_until_ready(presence.absent(*a))
+
+    r = C.timeit(run, [arrays], calls, budget_s=10.0, warmup=5)
+    return dict(median_us=1e3 * r["time_ms"], p90_us=1e3 * r["p90_ms"], load=C.load_average())
+
+
 def main(frames: int = 2, seed: int = 7100, out: str | None = None) -> list[dict]:
     """Laser on / off statistics per condition and stripe; the synthetic frames."""
     import tempfile
@@ -292,8 +315,11 @@ if __name__ == "__main__":
     a.add_argument("--compare", help="compare the laser-on centres with this .npz")
     a.add_argument("--table6-seed", type=int, default=6)
     a.add_argument("--table6-frames", type=int, default=16)
+    a.add_argument("--time", action="store_true", help="time the no-stripe test alone")
     args = a.parse_args()
-    if args.dump or args.compare:
+    if args.time:
+        print(time_test())
+    elif args.dump or args.compare:
         dump_or_compare(
             args.dump or args.compare,
             bool(args.compare),
