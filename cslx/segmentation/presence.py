@@ -17,15 +17,15 @@ Evidence (`experiments/no_stripe.py`, development seeds 7100–7117, the 18 cond
 robust-extraction benchmark, frames 0–1, each rendered again with `laser_power` 0). Laser on,
 every frame of that benchmark (frames 0–2, 108 stripes), the Table 6 frames (seed 6, 16
 frames) and the flat wall (seeds 41–46, saturated with and without sun), 164 stripes in all:
-median σ 0.044–0.228 px (the largest six on the printed target's vertical stripe, 0.14–0.23;
-every other ≤ 0.128), median z 35.2–1377 (the printed target's thin faint stripe 35–53,
-every other ≥ 78). Laser off (72 stripes): 60 gave centres (14 316 in all; sunlit, glare
-and green / blue frames up to 616 per stripe), with median σ 0.026–1.56 px and z 5.5–49.9.
+median σ 0.037–0.228 px (the largest six on the printed target's vertical stripe, 0.14–0.23;
+every other ≤ 0.128), median z 35.2–1427 (the printed target's thin faint stripe 35–53,
+every other ≥ 78). Laser off (72 stripes): 55 gave centres (13 768 in all; on the sunlit
+T-junctions 123–616 per horizontal stripe), with median σ 0.026–1.56 px and z 5.7–49.9.
 Neither statistic alone separates them: a sunlit sheen line on a T-junction scored σ 0.149,
 z 24.5 (616 centres), and a shadow edge z 47–50 at σ 0.18–0.19 (217 and 370 centres) —
 both inside the printed target's laser-on range. The thresholds 0.4 px and 18 keep a factor
-1.75 (σ) and 1.95 (z) from the nearest laser-on stripe, and drop 53 of the 60 laser-off
-stripes (14 316 → 2 535 centres). Left: the two shadow edges and the sheen line above, three
+1.75 (σ) and 1.95 (z) from the nearest laser-on stripe, and drop 48 of the 55 laser-off
+stripes (13 768 → 2 535 centres). Left: the two shadow edges and the sheen line above, three
 sunlit sheen lines with σ 0.32–0.35 and z 25–29 (345–480 centres; a σ limit of 0.3 would
 catch them with a factor 1.32 to the printed target), and a 27-centre glint piece (σ 0.06,
 z 21.8). Synthetic frames (black, white, fully clipped, uniform grey, Gaussian and uniform
