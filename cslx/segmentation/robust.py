@@ -47,7 +47,7 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
 8. No stripe (`cslx.segmentation.presence`): a path whose centres' median `sigma` exceeds
    0.4 px or whose median strength is below 18 × the ridge noise is no stripe, and all its
    centres are dropped: with the laser off in sunlight the bead's sheen was linked into
-   500–600 "centres" per stripe. No laser-on development frame is changed (bit-identical).
+   up to 616 "centres" per stripe. No laser-on development frame is changed (bit-identical).
 
 Evidence (`experiments/robust_extraction.py`, 2 frames × 18 conditions — the four presets,
 green and blue lasers, saturated cores with and without sun, a thin stripe on a printed
