@@ -56,9 +56,9 @@ def conditions() -> list[tuple[str, str]]:
 
 def laser_off(nuisance):
     """The `Nuisance` of a preset / hard condition with the laser switched off."""
-    from cslx.sim.render import _nuisance
+    from cslx import sim
 
-    return _nuisance(nuisance)._replace(laser_power=0.0)
+    return {**sim.NUISANCES, **sim.HARD_NUISANCES}[nuisance]._replace(laser_power=0.0)
 
 
 def stripe_stats(c) -> dict:
