@@ -21,14 +21,16 @@ zero on it; the default method's `--space auto` finds the stripe in it by itself
 The default method "linked" (issue 11: candidate ridges linked along the stripe, clipped cores,
 width-aware σ; evidence in results/robust_extraction.md) adds the optional columns `sigma_px`
 (predicted standard deviation of the centre along the search axis, px) and `saturated` (1: the
-centre of a clipped core, taken from the plateau's flanks). The paper's MED + Steger is
-`--method med` (Table 6). With fixed colour weights (every --space but auto) it runs MED only
-where the stripe is (`cslx.segmentation.med_bands`, issue 13): a band around each stripe from a
-first pass, linear-phase MED in the band warm-started from the previous image's band filter,
-Steger there; an image whose stripe does not fit a band gets the paper's full-frame MED.
-Images are processed in batches of `MED_BATCH`; the CSV rows of one batch are written while
-the next batch computes. Centres agree with full-frame MED within a few hundredths of a pixel
-(results/bench_speed.md); with --space auto every image goes through full-frame MED.
+centre of a clipped core, taken from the plateau's flanks); a stripe it does not find (e.g. the
+laser off: `cslx.segmentation.presence`) gets one line "no stripe found in FILE (horizontal):
+…". The paper's MED + Steger is `--method med` (Table 6). With fixed colour weights (every
+--space but auto) it runs MED only where the stripe is (`cslx.segmentation.med_bands`, issue
+13): a band around each stripe from a first pass, linear-phase MED in the band warm-started from
+the previous image's band filter, Steger there; an image whose stripe does not fit a band gets
+the paper's full-frame MED. Images are processed in batches of `MED_BATCH`; the CSV rows of one
+batch are written while the next batch computes. Centres agree with full-frame MED within a few
+hundredths of a pixel (results/bench_speed.md); with --space auto every image goes through
+full-frame MED.
 
 Images are decoded in a thread pool ahead of the compute (OpenCV releases the GIL), and the
 rows of each image are formatted in one call, so that reading and writing overlap the
@@ -390,11 +392,27 @@ def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats, rec
             extra = np.stack([np.asarray(centres.sigma), np.asarray(centres.saturated)], 1)[ok]
         stats.centres[stripe].append(len(uv))
         found += len(uv)
+        if method == "linked" and len(uv) == 0:
+            print(f"cslx extract: {no_stripe_line(path, stripe)}", file=sys.stderr)
         _write_block(out, path, stripe, uv, sensor, extra)
-    if found == 0:
+    if found == 0 and method == "linked":
+        stats.failed += 1  # each stripe said why above
+    elif found == 0:
         stats.fail(path, "no stripe found")
     else:
         stats.ok += 1
+
+
+def no_stripe_line(path, stripe: str) -> str:
+    """The line `cslx extract` prints for a stripe the linked detector did not find."""
+    from ..segmentation.presence import NO_STRIPE_SIGMA, NO_STRIPE_Z
+
+    name = {"h": "horizontal", "v": "vertical"}[stripe]
+    return (
+        f"no stripe found in {path} ({name}): no line of centres with a median predicted "
+        f"σ ≤ {NO_STRIPE_SIGMA:g} px and ridge strength ≥ {NO_STRIPE_Z:g} × noise (laser off, "
+        "blocked or out of view?)"
+    )
 
 
 def _write_block(out, path, stripe, uv, sensor, extra=None) -> None:

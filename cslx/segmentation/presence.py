@@ -1,0 +1,83 @@
+"""Is there a stripe at all? Step 8 of the linked detector (`cslx.segmentation.robust`).
+
+The linking (`cslx.segmentation.ridges`) returns the best continuous curve of ridge points it
+finds, and with the laser off, blocked or out of view that curve is something else: the
+sheen of a sunlit bead, a shadow edge, rust or print. Its centres then look unlike a laser
+line's in two per-stripe statistics the detector already has:
+
+- the median predicted standard deviation of the centres (`Centres.sigma`, the CSV's
+  `sigma_px`: the larger of the Hessian's noise term and the path's scatter about its local
+  line), and
+- the median ridge strength (`Centres.strength`, in units of the frame's ridge noise z).
+
+A stripe whose median σ exceeds `NO_STRIPE_SIGMA` or whose median z is below `NO_STRIPE_Z` is
+no stripe: all its centres are dropped (`absent`), and `cslx extract` says so.
+
+Evidence (`experiments/no_stripe.py`, development seeds 7100–7117, the 18 conditions of the
+robust-extraction benchmark, frames 0–1, each rendered again with `laser_power` 0). Laser on,
+every frame of that benchmark (frames 0–2, 108 stripes), the Table 6 frames (seed 6, 16
+frames) and the flat wall (seeds 41–46, saturated with and without sun), 164 stripes in all:
+median σ 0.037–0.228 px (the largest six on the printed target's vertical stripe, 0.14–0.23;
+every other ≤ 0.128), median z 35.2–1427 (the printed target's thin faint stripe 35–53,
+every other ≥ 78). Laser off (72 stripes): 55 gave centres (13 768 in all; on the sunlit
+T-junctions 123–616 per horizontal stripe), with median σ 0.026–1.56 px and z 5.7–49.9.
+Neither statistic alone separates them: a sunlit sheen line on a T-junction scored σ 0.149,
+z 24.5 (616 centres), and a shadow edge z 47–50 at σ 0.18–0.19 (217 and 370 centres) —
+both inside the printed target's laser-on range. The thresholds 0.4 px and 18 keep a factor
+1.75 (σ) and 1.95 (z) from the nearest laser-on stripe, and drop 48 of the 55 laser-off
+stripes (13 768 → 2 535 centres). Left: the two shadow edges and the sheen line above, three
+sunlit sheen lines with σ 0.32–0.35 and z 25–29 (345–480 centres; a σ limit of 0.3 would
+catch them with a factor 1.32 to the printed target), and a 27-centre glint piece (σ 0.06,
+z 21.8). Synthetic frames (black, white, fully clipped, uniform grey, Gaussian and uniform
+noise) give no centres before the test already; a sunlit printed target and a red rust
+texture with the laser off gave 21–269 centres per stripe (σ 0.17–0.73, z 5.5–13), all
+dropped. On every laser-on frame above the output is bit-identical with and without the
+test. Cost: two medians of N = W or H values in one compiled call, 0.24 ms per stripe warm
+(median, load 13; `experiments/no_stripe.py --time`) against 36–80 ms for the detector.
+
+Not tested per piece: a stripe that is partly absent (the laser's end in view with sheen
+linked beyond it) keeps its pieces; the development frames hold no such case to set a
+threshold on.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+__all__ = ["NO_STRIPE_SIGMA", "NO_STRIPE_Z", "absent", "stripe_medians"]
+
+#: A stripe whose centres' median predicted std (px) exceeds this is no stripe. None turns
+#: the test off (the experiment's statistics are taken without it).
+NO_STRIPE_SIGMA: float | None = 0.4
+#: A stripe whose centres' median strength (noise units z) is below this is no stripe.
+NO_STRIPE_Z = 18.0
+
+
+def stripe_medians(sigma, strength, valid):
+    """Median predicted std (px) and median strength (z) of the valid centres; NaN where
+    there are none."""
+    return (
+        jnp.nanmedian(jnp.where(valid, sigma, jnp.nan)),
+        jnp.nanmedian(jnp.where(valid, strength, jnp.nan)),
+    )
+
+
+def absent(pos, valid, sigma, strength, saturated):
+    """The stripe's (pos, valid, sigma, saturated) with no centre where it is no stripe
+    (median σ > `NO_STRIPE_SIGMA` or median z < `NO_STRIPE_Z`, module docstring), else the
+    arrays unchanged."""
+    return _absent(pos, valid, sigma, strength, saturated, NO_STRIPE_SIGMA, NO_STRIPE_Z)
+
+
+@jax.jit
+def _absent(pos, valid, sigma, strength, saturated, max_sigma, min_z):
+    s, z = stripe_medians(sigma, strength, valid)
+    present = (s <= max_sigma) & (z >= min_z)
+    nan = jnp.full_like(pos, jnp.nan)
+    return (
+        jnp.where(present, pos, nan),
+        valid & present,
+        jnp.where(present, sigma, nan),
+        saturated & present,
+    )

@@ -1,0 +1,107 @@
+"""No stripe in view (`cslx.segmentation.presence`, step 8 of the linked detector): the laser
+switched off on a sunlit T-junction, black / white / clipped / noise frames, and `cslx
+extract`'s line for a stripe it did not find."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+
+from cslx.segmentation import centres_to_pixels, extract, presence
+
+# Development seed of the robust-extraction benchmark's cross/sunny condition (7100 + 3):
+# with the laser off, the bead's sheen was linked into 508 (h) and 337 (v) centres.
+SEED, KIND, NUISANCE = 7103, "cross", "sunny"
+
+
+def _count(image, stripe):
+    uv = centres_to_pixels(extract(image, "linked", stripe=stripe), stripe)
+    return int(np.all(np.isfinite(uv), axis=1).sum())
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """(laser on, laser off): the same rendered scene, sun, glints and noise."""
+    from experiments.common import frame_at
+    from experiments.no_stripe import laser_off
+
+    on, _ = frame_at(KIND, NUISANCE, SEED, 0)
+    off, _ = frame_at(KIND, laser_off(NUISANCE), SEED, 0)
+    return on, off
+
+
+def test_laser_off_gives_no_centres_and_laser_on_keeps_them(frames, monkeypatch):
+    on, off = frames
+    for stripe, n in (("h", 640), ("v", 480)):
+        assert _count(off, stripe) == 0
+        kept = _count(on, stripe)
+        monkeypatch.setattr(presence, "NO_STRIPE_SIGMA", None)  # the test off
+        assert _count(on, stripe) == kept > 0.99 * n
+        assert _count(off, stripe) > 100  # what the test removes: the sheen's "stripe"
+        monkeypatch.undo()
+
+
+@pytest.mark.parametrize(
+    "name", ["black", "white", "clipped", "grey", "noise_gauss", "noise_uniform"]
+)
+def test_frames_without_a_laser_give_no_centres(name):
+    rng = np.random.default_rng(5)
+    shape = (240, 320, 3)
+    image = {
+        "black": np.zeros(shape, np.uint8),
+        "white": np.full(shape, 250, np.uint8),
+        "clipped": np.full(shape, 255, np.uint8),
+        "grey": np.full(shape, 128, np.uint8),
+        "noise_gauss": np.clip(rng.normal(128, 12, shape), 0, 255).astype(np.uint8),
+        "noise_uniform": rng.integers(0, 256, shape).astype(np.uint8),
+    }[name]
+    for stripe in ("h", "v"):
+        c = extract(image, "linked", stripe=stripe)
+        assert not np.asarray(c.valid).any()
+        assert np.isnan(np.asarray(c.pos)).all()
+
+
+def test_absent_keeps_a_stripe_bit_for_bit_and_drops_a_noisy_one():
+    rng = np.random.default_rng(2)
+    n = 200
+    pos = 50 + rng.normal(0, 0.1, n)
+    valid = np.ones(n, bool)
+    valid[:20] = False
+    pos[~valid] = np.nan
+    sigma = np.where(valid, 0.08, np.nan)
+    strength = np.where(valid, 60.0, 0.0)
+    sat = np.zeros(n, bool)
+    sat[50:60] = True
+    out = presence.absent(pos, valid, sigma, strength, sat)
+    for a, b in zip(out, (pos, valid, sigma, sat), strict=True):
+        assert np.array_equal(np.asarray(a), b, equal_nan=True)
+    for s, z in ((1.5 * presence.NO_STRIPE_SIGMA, 60.0), (0.08, 0.5 * presence.NO_STRIPE_Z)):
+        p, v, sg, st = presence.absent(
+            pos, valid, np.where(valid, s, np.nan), np.where(valid, z, 0.0), sat
+        )
+        assert not np.asarray(v).any() and not np.asarray(st).any()
+        assert np.isnan(np.asarray(p)).all() and np.isnan(np.asarray(sg)).all()
+
+
+def test_cli_says_which_stripe_it_did_not_find(frames, tmp_path, capsys):
+    import cv2
+
+    from cslx.cli import main
+
+    on, off = frames
+    p_on, p_off = tmp_path / "on.png", tmp_path / "off.png"
+    cv2.imwrite(str(p_on), on[..., ::-1])
+    cv2.imwrite(str(p_off), off[..., ::-1])
+    out = tmp_path / "c.csv"
+    code = main(["extract", str(p_on), str(p_off), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 1  # the laser-off frame has no stripe: reported, counted as failed
+    for name in ("horizontal", "vertical"):
+        assert f"no stripe found in {p_off} ({name}):" in err
+        assert f"no stripe found in {p_on} ({name})" not in err
+    with open(out, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["image"] for r in rows} == {str(p_on)}
+    assert sum(r["stripe"] == "h" for r in rows) == _count(on, "h")
