@@ -140,6 +140,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SEARCH_STRIDE, SIGMA_MAX
+from . import chroma
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -412,7 +413,7 @@ def linked_extract(
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)
-        mono, filled, blind, _, mono2 = _prepare(
+        mono, filled, blind, w, mono2 = _prepare(
             image,
             clip_level,
             jnp.asarray(weights, image.dtype),
@@ -420,6 +421,10 @@ def linked_extract(
             auto=auto,
             divide=REFINE_REFLECTANCE,
         )
+        if CHROMA_REFINE and chroma.subsampled(image, axis):  # never on rendered frames
+            run = max_run_for(image.shape[:2])
+            kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=run)
+            mono2 = chroma.second_signal(image, w, clip_level, **kw)
     else:
         mono, _ = monochrome_for(image, space, stripe)
         mono2 = mono
@@ -481,6 +486,9 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
+#: Where the chroma is subsampled along the profile (`chroma.subsampled`: JPEG, YUYV, not a
+#: rendered frame), step 7 runs on this signal (`chroma.second_signal`); None: off.
+CHROMA_REFINE = "luma"
 #: Along-path σ (px) of each re-measurement of step 7, in order; None is
 #: `refine.SIGMA_REFINE`. One pass by default. Why more were tried (issue 11, the toes):
 #: `refine_centres` returns p + G∗(c − p) for a reference path p, so its error is
