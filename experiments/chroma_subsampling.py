@@ -23,8 +23,8 @@ rendering, saturated stripes with and without sun, development seeds 61–64, pl
 walls lit by a saturated green laser): RMS (px) of the undistorted centres about their line.
 Held-out seeds (9100–9117, 51–54) are not used.
 
-`--variant` runs the detector with `cslx.segmentation.robust.CHROMA_REFINE` set to another
-choice (A/B of the refinement signal); rendered frames are cached in `--cache`.
+`--variants` runs the detector with `cslx.segmentation.robust.CHROMA_REFINE` (and
+`CHROMA_SATURATED` after an @) set to other choices (`set_variant`; A/B of the signal); rendered frames are cached in `--cache`.
 
 Writes `chroma_subsampling.csv` and `chroma_subsampling.md` in `--out`.
 """
@@ -196,6 +196,22 @@ def _line(r) -> str:
     )
 
 
+def set_variant(variant: str):
+    """Set `robust.CHROMA_REFINE` (and `CHROMA_SATURATED` after an @) from a variant name:
+    "default" leaves them, "none" turns the chroma test off, e.g. "luma@0" uses the luma on
+    every subsampled frame, "luma*0.5@0" averages its centres with the colour space's."""
+    from cslx.segmentation import robust
+
+    if variant == "default":
+        return
+    name, _, share = variant.partition("@")
+    name, _, blend = name.partition("*")
+    robust.CHROMA_REFINE = None if name == "none" else name
+    robust.CHROMA_BLEND = float(blend) if blend else 1.0
+    if share:
+        robust.CHROMA_SATURATED = float(share)
+
+
 def main(
     frames: int = 1,
     seed: int = 7100,
@@ -215,13 +231,13 @@ def main(
     t0 = time.time()
     data = load_frames(cache, seed, frames, tuple(flat_seeds), sensor)
     rows = []
-    default = robust.CHROMA_REFINE
+    default = robust.CHROMA_REFINE, robust.CHROMA_SATURATED, robust.CHROMA_BLEND
     for variant in variants:
-        robust.CHROMA_REFINE = {"default": default, "none": None}.get(variant, variant)
+        set_variant(variant)
         try:
             rows += evaluate(data, pipelines, sensor, variant)
         finally:
-            robust.CHROMA_REFINE = default
+            robust.CHROMA_REFINE, robust.CHROMA_SATURATED, robust.CHROMA_BLEND = default
     os.makedirs(out, exist_ok=True)
     write_csv(os.path.join(out, "chroma_subsampling.csv"), rows, FIELDS)
     prov = provenance(

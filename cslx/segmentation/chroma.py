@@ -51,6 +51,7 @@ __all__ = [
     "WINDOW",
     "chroma_nyquist",
     "luma",
+    "saturated_share",
     "second_signal",
     "subsampled",
 ]
@@ -117,3 +118,9 @@ def second_signal(image, weights, clip_level, *, axis: int, variant: str, max_ru
     if variant == "luma-div":
         mono = _reflectance_divided(image, mono, clipped)
     return fill_clipped(mono, clipped, axis=axis, max_run=max_run)[0]
+
+
+def saturated_share(saturated, valid) -> float:
+    """Share of the valid centres flagged saturated (a clipped core or a bridge)."""
+    v = np.asarray(valid)
+    return float(np.mean(np.asarray(saturated)[v])) if v.any() else 0.0

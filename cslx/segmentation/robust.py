@@ -421,13 +421,10 @@ def linked_extract(
             auto=auto,
             divide=REFINE_REFLECTANCE,
         )
-        if CHROMA_REFINE and chroma.subsampled(image, axis):  # never on rendered frames
-            run = max_run_for(image.shape[:2])
-            kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=run)
-            mono2 = chroma.second_signal(image, w, clip_level, **kw)
+        sub = bool(CHROMA_REFINE) and chroma.subsampled(image, axis)  # not on rendered frames
     else:
         mono, _ = monochrome_for(image, space, stripe)
-        mono2 = mono
+        mono2, sub = mono, False
         filled = jnp.zeros(mono.shape, bool)
         blind = filled
     sa = SIGMA_ALONG
@@ -440,12 +437,21 @@ def linked_extract(
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
+    signals = [(mono2, 1.0)]
+    if sub and chroma.saturated_share(sat, valid) >= CHROMA_SATURATED:
+        kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=max_run_for(image.shape[:2]))
+        luma = chroma.second_signal(image, w, clip_level, **kw)
+        signals = [(mono2, 1.0 - CHROMA_BLEND), (luma, CHROMA_BLEND)][CHROMA_BLEND == 1 :]
     if REFINE:
         unusable = filled | blind
-        for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
-            pos = second_pass(
-                mono2, pos, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
-            )
+        first_pos, pos = pos, 0.0
+        for m2, weight in signals:
+            p = first_pos
+            for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
+                p = second_pass(
+                    m2, p, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
+                )
+            pos = pos + weight * p if len(signals) > 1 else p
     return c._replace(
         pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
     )
@@ -489,6 +495,10 @@ REFINE = True
 #: Where the chroma is subsampled along the profile (`chroma.subsampled`: JPEG, YUYV, not a
 #: rendered frame), step 7 runs on this signal (`chroma.second_signal`); None: off.
 CHROMA_REFINE = "luma"
+#: ... and at least this share of the path's centres is saturated (`Centres.saturated`).
+CHROMA_SATURATED = 0.5
+#: Weight of the luma's centres against the colour space's (1: the luma's alone).
+CHROMA_BLEND = 0.5
 #: Along-path σ (px) of each re-measurement of step 7, in order; None is
 #: `refine.SIGMA_REFINE`. One pass by default. Why more were tried (issue 11, the toes):
 #: `refine_centres` returns p + G∗(c − p) for a reference path p, so its error is
