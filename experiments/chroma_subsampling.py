@@ -24,7 +24,8 @@ walls lit by a saturated green laser): RMS (px) of the undistorted centres about
 Held-out seeds (9100–9117, 51–54) are not used.
 
 `--variants` runs the detector with `cslx.segmentation.robust.CHROMA_REFINE` (and
-`CHROMA_SATURATED` after an @) set to other choices (`set_variant`; A/B of the signal); rendered frames are cached in `--cache`.
+`CHROMA_SATURATED` after an @) set to other choices (`set_variant`; A/B of the signal);
+rendered frames are cached in `--cache`.
 
 Writes `chroma_subsampling.csv` and `chroma_subsampling.md` in `--out`.
 """
@@ -114,8 +115,8 @@ def load_frames(cache: str, seed: int, frames: int, flat_seeds: tuple[int, ...],
     os.makedirs(cache, exist_ok=True)
     out = []
     jobs = [
-        (f"{k}-{n}-{seed + c}-{i}", lambda k=k, n=n, c=c, i=i: C.frame_at(k, n, seed + c, i, sensor))
-        for c, (k, n) in enumerate(conditions())
+        (f"{k}-{n}-{s}-{i}", lambda k=k, n=n, s=s, i=i: C.frame_at(k, n, s, i, sensor))
+        for s, (k, n) in enumerate(conditions(), start=seed)
         for i in range(frames)
     ]
     jobs += [
@@ -163,8 +164,8 @@ def evaluate(frames, pipelines, sensor, variant: str) -> list[dict]:
                     flat[stripe].append(float(np.sqrt(np.mean(r**2))) if len(r) else np.nan)
                     flat_max[stripe] = max(flat_max[stripe], float(np.max(np.abs(r), initial=0)))
                 else:
-                    res = C.point_errors(uv, gt[C.STRIPE_GT[stripe]], sensor, C.STRIPE_PLANE[stripe])
-                    pools[stripe].add(*res)
+                    truth = gt[C.STRIPE_GT[stripe]]
+                    pools[stripe].add(*C.point_errors(uv, truth, sensor, C.STRIPE_PLANE[stripe]))
         for stripe in "hv":
             s = pools[stripe].summary()
             f = np.asarray(flat[stripe])
