@@ -492,12 +492,12 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
-#: Where the chroma is subsampled along the profile (`chroma.subsampled`: JPEG, YUYV, not a
-#: rendered frame), step 7 runs on this signal (`chroma.second_signal`); None: off.
+#: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
+#: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
+#: (`chroma.second_signal`; None: off), its centres weighted `CHROMA_BLEND` against the colour
+#: space's. Evidence: `cslx.segmentation.chroma`.
 CHROMA_REFINE = "luma"
-#: ... and at least this share of the path's centres is saturated (`Centres.saturated`).
 CHROMA_SATURATED = 0.5
-#: Weight of the luma's centres against the colour space's (1: the luma's alone).
 CHROMA_BLEND = 0.5
 #: Along-path σ (px) of each re-measurement of step 7, in order; None is
 #: `refine.SIGMA_REFINE`. One pass by default. Why more were tried (issue 11, the toes):
