@@ -44,11 +44,6 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    smoothing along the stripe bends a tilted stripe by up to 1.4 px) the centres take the
    value of the fit through the interior ones (their `sigma` raised by the extrapolation).
 
-8. No stripe (`cslx.segmentation.presence`): a path whose centres' median `sigma` exceeds
-   0.4 px or whose median strength is below 18 × the ridge noise is no stripe, and all its
-   centres are dropped: with the laser off in sunlight the bead's sheen was linked into
-   up to 616 "centres" per stripe. No laser-on development frame is changed (bit-identical).
-
 Evidence (`experiments/robust_extraction.py`, 2 frames × 18 conditions — the four presets,
 green and blue lasers, saturated cores with and without sun, a thin stripe on a printed
 target — at held-out seeds 9100–9117; development used 7100–7117). Horizontal / vertical
@@ -127,10 +122,12 @@ averages out): the goal's median is near that floor even without speckle.
    (`refine.LOCAL_WEIGHTS`): development frames (36), H / V median / p95 0.0300 / 0.1347,
    0.0313 / 0.1438 → 0.0297 / 0.1336, 0.0312 / 0.1398 mm; fresh frame 2 (18) 0.0290 /
    0.1397, 0.0358 / 0.1517 → 0.0283 / 0.1346, 0.0346 / 0.1495; +4–5 ms per stripe.
-Cost per frame and stripe, warm, horizontal / vertical,
-wall time in the experiment: 36 / 37 ms at load 6.5–7.9, the old default's 69 / 83 ms in the
-same run (the version before path smoothing: 31 / 31 ms against 68 / 76 ms at load 5–7; the
-path smoothing alone ≈ 1 ms per stripe); ≈ 700 ms before the column-profile rework.
+   A saturated path on a chroma-subsampled frame (JPEG, YUYV) is also re-measured on the
+   luma, the two averaged (`CHROMA_REFINE`, evidence in `cslx.segmentation.chroma`).
+8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
+   strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
+   up to 616 "centres" per stripe); no laser-on development frame changes (bit-identical).
+Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """
 
 from __future__ import annotations
@@ -145,7 +142,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SEARCH_STRIDE, SIGMA_MAX
-from . import presence
+from . import chroma, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -418,7 +415,7 @@ def linked_extract(
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)
-        mono, filled, blind, _, mono2 = _prepare(
+        mono, filled, blind, w, mono2 = _prepare(
             image,
             clip_level,
             jnp.asarray(weights, image.dtype),
@@ -426,9 +423,10 @@ def linked_extract(
             auto=auto,
             divide=REFINE_REFLECTANCE,
         )
+        sub = bool(CHROMA_REFINE) and chroma.subsampled(image, axis)  # not on rendered frames
     else:
         mono, _ = monochrome_for(image, space, stripe)
-        mono2 = mono
+        mono2, sub = mono, False
         filled = jnp.zeros(mono.shape, bool)
         blind = filled
     sa = SIGMA_ALONG
@@ -441,12 +439,21 @@ def linked_extract(
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
+    signals = [(mono2, 1.0)]
+    if sub and chroma.saturated_share(sat, valid) >= CHROMA_SATURATED:
+        kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=max_run_for(image.shape[:2]))
+        luma = chroma.second_signal(image, w, clip_level, **kw)
+        signals = [(mono2, 1.0 - CHROMA_BLEND), (luma, CHROMA_BLEND)][CHROMA_BLEND == 1 :]
     if REFINE:
         unusable = filled | blind
-        for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
-            pos = second_pass(
-                mono2, pos, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
-            )
+        first_pos, pos = pos, 0.0
+        for m2, weight in signals:
+            p = first_pos
+            for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
+                p = second_pass(
+                    m2, p, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
+                )
+            pos = pos + weight * p if len(signals) > 1 else p
     if presence.NO_STRIPE_SIGMA is not None:  # step 8
         pos, valid, sig, sat = presence.absent(pos, valid, sig, c.strength, sat)
     return c._replace(
@@ -489,6 +496,13 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
+#: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
+#: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
+#: (`chroma.second_signal`; None: off), its centres weighted `CHROMA_BLEND` against the colour
+#: space's. Evidence: `cslx.segmentation.chroma`.
+CHROMA_REFINE = "luma"
+CHROMA_SATURATED = 0.5
+CHROMA_BLEND = 0.5
 #: Along-path σ (px) of each re-measurement of step 7, in order; None is
 #: `refine.SIGMA_REFINE`. One pass by default. Why more were tried (issue 11, the toes):
 #: `refine_centres` returns p + G∗(c − p) for a reference path p, so its error is

@@ -1,0 +1,147 @@
+"""Chroma-subsampled frames (real-camera formats): the test, and the full-resolution signal.
+
+Rendered frames are full-resolution RGB; real cameras rarely deliver that. Webcams stream
+MJPEG (JPEG: YCbCr with the chroma sampled 4:2:0, i.e. at half resolution both ways) or
+YUYV (4:2:2, half resolution horizontally), photos are JPEG 4:2:0, and JPEG's chroma
+quantisation removes the fine chroma detail at any quality. For a red laser on a grey
+board the colour space the kurtosis search picks (R − G = 0.344 Cb + 2.116 Cr in JFIF
+YCbCr) is pure chroma: in such a frame the stripe's profile across it is sampled at half
+resolution, blurred and aliased by the phase of the stripe on the 2-pixel chroma grid,
+while the luma Y = 0.299 R + 0.587 G + 0.114 B keeps every pixel.
+
+The test (`subsampled`). Chroma interpolated from half resolution (repeated over pixel
+pairs by YUYV decoders, linearly by libjpeg's "fancy" upsampling) has no energy at the
+Nyquist frequency of the full grid, and JPEG's chroma quantisation zeroes it in the flat
+blocks; a full-resolution sensor's chroma carries its noise there. Along the profile's
+axis (image axis 0 for the horizontal stripe, 1 for the vertical), the frame is cut into
+windows of `WINDOW` pixels aligned with the grid and each window's Nyquist coefficient
+Σₙ (−1)ⁿ c(n) / √`WINDOW` is taken of Cb and Cr; the median over the windows of their
+summed squares is the chroma's Nyquist power (DN², per pixel: the noise variance for white
+noise), robust to the stripe and to edges. Below `NYQUIST_FLOOR` the chroma counts as
+subsampled. Development frames (seeds 7100–7117 frame 0, flat walls 61–64 saturated, sunny
+and green; `experiments/chroma_subsampling.py`), both axes: rendered PNG 1.67–5.0 DN²
+(read and shot noise), YUYV horizontal 0.035 (8-bit rounding; vertical 1.0–2.8, full
+resolution as it should be), JPEG 4:2:0 at quality 95 / 85 / 70 and 4:4:4 at 70: 0 on
+every frame. A noise-free synthetic frame has no chroma noise either, and is treated as
+subsampled: its luma holds the stripe at full resolution as well.
+
+The signal (`luma`). Where the chroma is subsampled, the colour space still finds the
+stripe (first pass of `cslx.segmentation.robust`); the second pass re-measures the centres
+on a full-resolution signal. The only one is Y (every RGB channel is Y plus a chroma term:
+R = Y + 1.402 Cr puts 70 % of a red laser's R contrast in the blurred Cr). It is used where
+at least `robust.CHROMA_SATURATED` (0.5) of the path is saturated, its second-pass centres
+averaged with the colour space's (`robust.CHROMA_BLEND` 0.5). Evidence (development frames
+as above, 18 robust + 12 flat; H / V; median / p95 mm, flat-wall RMS px), no change → this:
+YUYV V 0.043 / 3.54, 0.169 → 0.056 / 2.93, 0.083 (H untouched); JPEG 4:2:0 q95 H 0.048 /
+0.247, 0.076 → 0.049 / 0.242, 0.056, V 0.048 / 0.257, 0.089 → 0.053 / 0.234, 0.056; q85 H
+0.076 / 0.492, 0.088 → 0.065 / 0.455, 0.069, V 0.050 / 0.343, 0.118 → 0.055 / 0.324, 0.077;
+q70 H 0.118 / 0.669, 0.141 → 0.096 / 0.619, 0.097, V 0.073 / 0.483, 0.116 → 0.076 /
+0.477, 0.094; 4:4:4 q70 H 0.056 / 0.349, 0.097 → 0.061 / 0.299, 0.072, V 0.055 / 0.298,
+0.169 → 0.060 / 0.284, 0.112. Gross (> 1 mm) shares fall or stay (q70 H 2.03 → 1.69 %).
+Tried and not kept: the luma alone on every subsampled frame (flat walls gain as much, but
+sunlit, printed and blue frames lose: q95 median 0.066 / 0.099, q70 0.088 / 0.105 mm — the
+luma carries the white sunlight, sheen, glints and print that R − G cancels); the luma
+alone where the path is saturated (q70 H 0.099, V 0.089 mm), the same divided by the
+reflectance (0.099, 0.084); the laser's own channel (R for red) on every subsampled frame
+(q95 H 0.056 mm against the luma's 0.066 and no change's 0.048); the average with the
+luma on every subsampled frame (q95 V median 0.061, q70 H 0.080 / V 0.079 mm; flat walls
+as with the gate). Cost: the test 2 ms per frame and stripe (load 20), on every frame; the
+luma's extra second pass where used (tens of ms under that load).
+
+Pure JAX, jit-able.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .clipped import clipped_mask, fill_clipped
+from .ridges import _median
+
+__all__ = [
+    "LINE_STRIDE",
+    "LUMA",
+    "NYQUIST_FLOOR",
+    "WINDOW",
+    "chroma_nyquist",
+    "luma",
+    "saturated_share",
+    "second_signal",
+    "subsampled",
+]
+
+#: JFIF (ITU-R BT.601) luma and chroma weights of R, G, B.
+LUMA = (0.299, 0.587, 0.114)
+_CB = (-0.168736, -0.331264, 0.5)
+_CR = (0.5, -0.418688, -0.081312)
+#: Window (px) of the Nyquist coefficient: the JPEG block, a multiple of the chroma pairs.
+WINDOW = 8
+#: Lines (across the windows' axis) used by the test: every `LINE_STRIDE`-th.
+LINE_STRIDE = 4
+#: Chroma Nyquist power (DN², per pixel) below which the chroma counts as subsampled.
+NYQUIST_FLOOR = 0.25
+
+
+def chroma_nyquist(image, axis: int):
+    """Median over `WINDOW`-pixel windows along image axis `axis` of the chroma's (Cb + Cr)
+    Nyquist power (DN² per pixel; module docstring). (H, W, 3) RGB, 8-bit scale."""
+    x = jnp.asarray(image)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    if axis == 0:
+        x = jnp.swapaxes(x, 0, 1)
+    x = x[::LINE_STRIDE]  # every 4th line across the windows: a quarter of the cost
+    h, w = x.shape[:2]
+    n = (w // WINDOW) * WINDOW
+    weights = jnp.asarray(np.stack([_CB, _CR], 1), x.dtype)  # (3, 2)
+    c = x[:, :n] @ weights  # (h, n, 2)
+    sign = jnp.asarray((-1.0) ** np.arange(WINDOW) / np.sqrt(WINDOW), x.dtype)
+    coef = jnp.einsum("hkwc,w->hkc", c.reshape(h, n // WINDOW, WINDOW, 2), sign)
+    power = jnp.sum(coef**2, axis=-1).reshape(-1)
+    return _median(power)
+
+
+@functools.partial(jax.jit, static_argnames=("axis",))
+def _subsampled(image, floor, *, axis: int):
+    return chroma_nyquist(image, axis) < floor
+
+
+def subsampled(image, axis: int, floor: float = NYQUIST_FLOOR) -> bool:
+    """True when the frame's chroma has no noise at the Nyquist frequency along image axis
+    `axis` (0: vertical, the horizontal stripe's profile; 1: horizontal): it was subsampled
+    (4:2:0 / 4:2:2) or compressed (module docstring). (H, W, 3) RGB, 8-bit scale."""
+    return bool(_subsampled(jnp.asarray(image), floor, axis=axis))
+
+
+def luma(image):
+    """(H, W) JFIF luma Y of an (H, W, 3) RGB frame: the one full-resolution signal of a
+    chroma-subsampled frame."""
+    return jnp.asarray(image) @ jnp.asarray(LUMA, jnp.asarray(image).dtype)
+
+
+@functools.partial(jax.jit, static_argnames=("axis", "variant", "max_run"))
+def second_signal(image, weights, clip_level, *, axis: int, variant: str, max_run: int):
+    """The second pass's monochrome image of a chroma-subsampled frame, clipped runs filled
+    as in the first (`cslx.segmentation.clipped.fill_clipped`). `variant`: "luma" (Y),
+    "luma-div" (Y divided by the reflectance as `robust._reflectance_divided`), "channel"
+    (the RGB channel of the colour space's largest weight `weights`)."""
+    from .robust import _reflectance_divided
+
+    clipped = clipped_mask(image, clip_level)
+    if variant == "channel":
+        mono = jnp.take(image, jnp.argmax(weights), axis=-1)
+    else:
+        mono = luma(image)
+    if variant == "luma-div":
+        mono = _reflectance_divided(image, mono, clipped)
+    return fill_clipped(mono, clipped, axis=axis, max_run=max_run)[0]
+
+
+def saturated_share(saturated, valid) -> float:
+    """Share of the valid centres flagged saturated (a clipped core or a bridge)."""
+    v = np.asarray(valid)
+    return float(np.mean(np.asarray(saturated)[v])) if v.any() else 0.0
