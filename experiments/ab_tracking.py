@@ -6,7 +6,9 @@ code before it, timed in the same process with the calls interleaved: the revisi
 imported beside the working tree's. Both run the tracking mode of `experiments.bench_speed`
 (`process_frame` with the default `PipelineConfig`, MED in the bands, consecutive rendered
 sunny video frames, seed 0, each its own state carried from frame to frame), alternating
-which goes first. Reported: median, p10 and p90 per frame, the load, and the largest
+which goes first. Reported: median, p10 and p90 per frame, the median process CPU time
+per frame (all threads; less sensitive to the other users of a loaded machine than the wall
+time, as a second opinion), the load, and the largest
 difference between the two programs' outputs over the first frames (0 when the change
 keeps the outputs bit for bit).
 
@@ -132,12 +134,14 @@ def main(argv=None) -> None:
         runs = {name: tracker(name, frames[0], args.program) for name in ("cslx_rev", "cslx")}
         states = {name: state for name, (_, state) in runs.items()}
         times = {name: [] for name in runs}
+        cpu = {name: [] for name in runs}
         outputs = {name: [] for name in runs}
         for k, i in enumerate(ping_pong(len(frames), args.calls)):
             for name in list(runs)[:: 1 if k % 2 else -1]:
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 result, states[name] = runs[name][0](frames[i], states[name])
                 times[name].append(time.perf_counter() - t)
+                cpu[name].append(time.process_time() - c)
                 if k < 2 * len(frames):
                     leaves = jax.tree_util.tree_leaves(result)
                     outputs[name].append(np.concatenate([np.ravel(x) for x in leaves]))
@@ -157,7 +161,8 @@ def main(argv=None) -> None:
         ms = np.asarray(times[name]) * 1e3
         print(
             f"{label:24s} median {np.median(ms):.2f} ms, p10 {np.percentile(ms, 10):.2f}, "
-            f"p90 {np.percentile(ms, 90):.2f}"
+            f"p90 {np.percentile(ms, 90):.2f}; process CPU median "
+            f"{np.median(cpu[name]) * 1e3:.2f} ms"
         )
     print(f"outputs: max |difference| {diff:.3g}, NaN mismatches {nan_mismatch}")
 
