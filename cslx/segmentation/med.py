@@ -404,11 +404,11 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1)
     matrix product with the band (`med_fft.shift_matrix`, the same values as the Fourier
     shift to float rounding); the band's own spectra are then not needed, and only the
     strided pairs are transformed (`med_fft.prepare` on them: the spectra `pairs` would
-    slice, bit for bit). Issue 13, band MED alone (`jax.jit` of `med` with ``lag``,
-    ``lag_stride=4``, L = 16, sunny video seed 0, 400 interleaved calls against the
-    forward and inverse FFT pair, load 9–12): 64×640 band median 0.59 → 0.54 ms (p10 0.40
-    → 0.37), 480×128 band 1.02 → 0.73 ms (p10 0.67 → 0.52); outputs within 1e-6 of their
-    largest value, filters identical.
+    slice, bit for bit). Issue 13, band MED alone against the forward and inverse FFT pair
+    (`experiments.ab_band_med`, 400 interleaved calls, load 17–19): 480×128 band median
+    0.90 → 0.64 ms (p10 0.67 → 0.51, median paired difference −0.22 ms), 64×640 band 0.48
+    → 0.48 ms (p10 0.40 → 0.37, paired −0.03 ms); outputs within 1e-6 of their largest
+    value, filters identical.
     """
     L, m = pb.L, pb.m
     matrix = delay_kind == "centre" and not (L % 2 and stride == 1)
