@@ -6,7 +6,9 @@ code before it, timed in the same process with the calls interleaved: the revisi
 imported beside the working tree's. Both run the tracking mode of `experiments.bench_speed`
 (`process_frame` with the default `PipelineConfig`, MED in the bands, consecutive rendered
 sunny video frames, seed 0, each its own state carried from frame to frame), alternating
-which goes first. Reported: median, p10 and p90 per frame, the load, and the largest
+which goes first. Reported: median, p10 and p90 per frame, the median process CPU time
+per frame (all threads; less sensitive to the other users of a loaded machine than the wall
+time, as a second opinion), the load, and the largest
 difference between the two programs' outputs over the first frames (0 when the change
 keeps the outputs bit for bit).
 
@@ -17,7 +19,9 @@ fill), ``fullframe`` (the cold full frame of `experiments.bench_speed`: `process
 call starts from the same initial state) or ``tracker`` (`Tracker.step` on NumPy frames,
 the robot's loop end to end: its one compiled step, the transfers to the host and the
 Kalman filter; compared outputs: the step's per-frame values, ``Observation.raw``, and the
-filtered offset and heading).
+filtered offset and heading); ``tracker-med`` the same `Tracker` with
+``config=PipelineConfig()`` (MED in the bands, as `experiments.bench_speed` times it). Also
+reported: the median of the paired differences (the two calls of a frame run back to back).
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev HEAD~1 --calls 300
     OPENBLAS_NUM_THREADS=1 python -m experiments.ab_tracking --rev main --program tracker
@@ -56,8 +60,8 @@ def tracker(package: str, frame, program: str = "pipeline"):
     """(step, state) of the tracking mode of ``package`` after a few warm-up frames."""
     import jax
 
-    if program == "tracker":
-        return robot_tracker(package, frame)
+    if program in ("tracker", "tracker-med"):
+        return robot_tracker(package, frame, med=program == "tracker-med")
     pipeline = importlib.import_module(f"{package}.runtime.pipeline")
     sensor = sensor32(package)
     if program == "tracking":
@@ -84,14 +88,17 @@ def tracker(package: str, frame, program: str = "pipeline"):
     return step, state
 
 
-def robot_tracker(package: str, frame):
-    """(step, None) of ``package``'s `Tracker` (default settings) after warm-up frames; the
-    step returns the observation's numbers (raw values, offset, heading) as one array."""
+def robot_tracker(package: str, frame, med: bool = False):
+    """(step, None) of ``package``'s `Tracker` (default settings; ``med``: with
+    ``config=PipelineConfig()``, MED in the bands) after warm-up frames; the step returns
+    the observation's numbers (raw values, offset, heading) as one array."""
     import logging
 
     runtime_tracker = importlib.import_module(f"{package}.runtime.tracker")
     sensor = importlib.import_module(f"{package}.sensor").default_sensor()
-    robot = runtime_tracker.Tracker(sensor, log=logging.getLogger("ab_tracking"))
+    pipeline = importlib.import_module(f"{package}.runtime.pipeline")
+    config = pipeline.PipelineConfig() if med else None
+    robot = runtime_tracker.Tracker(sensor, config=config, log=logging.getLogger("ab_tracking"))
     frame = np.asarray(frame)
 
     def step(rgb, state):
@@ -112,16 +119,16 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0, help="video seed (bench_speed's)")
     ap.add_argument(
         "--program",
-        choices=("pipeline", "tracking", "fullframe", "tracker"),
+        choices=("pipeline", "tracking", "fullframe", "tracker", "tracker-med"),
         default="pipeline",
         help="process_frame with PipelineConfig() / with tracking_config() / cold with "
-        "roi=False, or Tracker.step",
+        "roi=False, or Tracker.step (default settings / with PipelineConfig())",
     )
     args = ap.parse_args(argv)
     import jax
 
     frames = video_frames(args.frames, args.seed)
-    if args.program == "tracker":
+    if args.program.startswith("tracker"):
         frames = [np.asarray(f) for f in frames]
     else:
         frames = [jax.numpy.asarray(f) for f in frames]
@@ -132,12 +139,14 @@ def main(argv=None) -> None:
         runs = {name: tracker(name, frames[0], args.program) for name in ("cslx_rev", "cslx")}
         states = {name: state for name, (_, state) in runs.items()}
         times = {name: [] for name in runs}
+        cpu = {name: [] for name in runs}
         outputs = {name: [] for name in runs}
         for k, i in enumerate(ping_pong(len(frames), args.calls)):
             for name in list(runs)[:: 1 if k % 2 else -1]:
-                t = time.perf_counter()
+                t, c = time.perf_counter(), time.process_time()
                 result, states[name] = runs[name][0](frames[i], states[name])
                 times[name].append(time.perf_counter() - t)
+                cpu[name].append(time.process_time() - c)
                 if k < 2 * len(frames):
                     leaves = jax.tree_util.tree_leaves(result)
                     outputs[name].append(np.concatenate([np.ravel(x) for x in leaves]))
@@ -157,8 +166,17 @@ def main(argv=None) -> None:
         ms = np.asarray(times[name]) * 1e3
         print(
             f"{label:24s} median {np.median(ms):.2f} ms, p10 {np.percentile(ms, 10):.2f}, "
-            f"p90 {np.percentile(ms, 90):.2f}"
+            f"p90 {np.percentile(ms, 90):.2f}; process CPU median "
+            f"{np.median(cpu[name]) * 1e3:.2f} ms"
         )
+    # the two calls of one frame ran back to back: their difference cancels most of the
+    # load's drift (median of the paired differences, and its spread over the frames)
+    paired = (np.asarray(times["cslx"]) - np.asarray(times["cslx_rev"])) * 1e3
+    q25, q50, q75 = np.percentile(paired, [25, 50, 75])
+    print(
+        f"paired (working tree − revision): median {q50:+.3f} ms, quartiles {q25:+.3f} / "
+        f"{q75:+.3f}; working tree faster in {np.mean(paired < 0):.0%} of the frames"
+    )
     print(f"outputs: max |difference| {diff:.3g}, NaN mismatches {nan_mismatch}")
 
 

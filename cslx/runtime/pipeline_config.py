@@ -126,10 +126,11 @@ class PipelineConfig(eqx.Module):
         10.10 → 9.31 ms (p10 6.52 → 5.92).
     roi_lag_stride: the lagged band step's statistics and fixed-point step on every k-th pair
         of segments (columns of the row band, rows of the column band; `cslx.segmentation.med.med`
-        ``lag_stride``: slices of the band's spectra, no FFT of their own); the band is still
-        filtered whole. 4 (default, since 5 Dec; 2 before): the step's inverse FFT, its
-        cubes' FFTs and the statistics run on a quarter of the band (the reported kurtosis
-        is that of those segments). Once the band cut and the weld features got faster
+        ``lag_stride``: only those pairs are Fourier transformed, and the band is filtered
+        whole by one matrix product, `cslx.segmentation.med_fft.shift_matrix`). 4 (default,
+        since 5 Dec; 2 before): the step's inverse FFT, its cubes' FFTs and the statistics
+        run on a quarter of the band (the reported kurtosis is that of those segments). Once
+        the band cut and the weld features got faster
         (issue 13), 4 paid: tracking mode 2.60 → 2.50 and 2.84 → 2.75 ms (8: 2.71), 400
         frames each, calls interleaved, quiet machine (load 1.1–1.3; `experiments/lag_stride.py`);
         band − full-frame MED centres over 8 carried tracking frames × 2 stripes, worst

@@ -398,19 +398,39 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1)
     with the filter of the step taken on frame t − 1.
 
     ``stride`` > 1: the statistics and the step on every stride-th packed pair of segments
-    (`med_fft.pairs`: slices of the spectra already computed, no FFT of their own), the
-    output on all of them.
+    (`med_fft.pairs`), the output on all of them.
+
+    A linear-phase filter (``delay="centre"``) has a static delay, and its output is one
+    matrix product with the band (`med_fft.shift_matrix`, the same values as the Fourier
+    shift to float rounding); the band's own spectra are then not needed, and only the
+    strided pairs are transformed (`med_fft.prepare` on them: the spectra `pairs` would
+    slice, bit for bit). Issue 13, band MED alone against the forward and inverse FFT pair
+    (`experiments.ab_band_med`, 400 interleaved calls, load 17–19): 480×128 band median
+    0.90 → 0.64 ms (p10 0.67 → 0.51, median paired difference −0.22 ms), 64×640 band 0.48
+    → 0.48 ms (p10 0.40 → 0.37, paired −0.03 ms); outputs within 1e-6 of their largest
+    value, filters identical.
     """
-    sub = pb if stride == 1 else _f.pairs(pb, stride)
+    L, m = pb.L, pb.m
+    matrix = delay_kind == "centre" and not (L % 2 and stride == 1)
+    if stride == 1:
+        sub = pb
+    elif matrix:  # the pairs (2j, 2j + 1), j = 0, k, 2k …: those of `med_fft.pairs`
+        X = jnp.pad(pb.X, ((0, pb.s % 2), (0, 0))).reshape(-1, 2, m)[::stride]
+        sub = _f.prepare(X.reshape(-1, m), L)
+    else:
+        sub = _f.pairs(pb, stride)
     W1, st = _f.update(W0, sub, loading, symmetric)
     delay, sign = _delay(W0, st, sub, delay_kind, ridge_sigma)
-    if delay_kind == "centre" and pb.L % 2 and stride == 1:
-        out = _f.centre_output(st, sign, pb)
-    elif delay_kind == "centre":
-        out = _f.shifted_output(W0 * sign, (pb.L - 1) / 2, pb)
+    if matrix:
+        M = _f.shift_matrix(W0 * sign, (L - 1) / 2, m, pb.n)
+        hi = jax.lax.Precision.HIGHEST  # no TF32 on GPUs
+        out = jnp.dot(M, pb.X.T, precision=hi) if axis == 0 else jnp.dot(pb.X, M.T, precision=hi)
     else:
-        out = _f.shifted_output(W0 * sign, delay, pb)
-    out = out.T if axis == 0 else out
+        if delay_kind == "centre":  # odd L, every segment: a slice of B, no FFT
+            out = _f.centre_output(st, sign, pb)
+        else:
+            out = _f.shifted_output(W0 * sign, delay, pb)
+        out = out.T if axis == 0 else out
     # ±W have the same kurtosis and the step keeps W0's orientation: W1 takes W0's sign
     one = jnp.ones((), jnp.int32)
     return MEDResult(out, W1 * sign, delay, st.excess, one, jnp.zeros((), bool))

@@ -373,6 +373,30 @@ def shifted_output(W: Float[Array, " L"], delay, pb: Problem) -> Float[Array, "s
     return out[: pb.s]
 
 
+def shift_matrix(W: Float[Array, " L"], delay: float, m: int, n: int) -> Float[Array, "m m"]:
+    """`shifted_output` as a matrix: B(i + delay) = Σ_j M_ij X_j for a segment X of m samples.
+
+    The Fourier shift by a static ``delay`` of the length-n circular convolution W ∗ X is a
+    circulant operator; its first m rows and columns are M_ij = g((i − j) mod n), g = W ⊛ s
+    with s the shift's impulse response (NumPy, static; real, the Nyquist bin being made
+    real as in `shifted_output`). g at the 2m − 1 lags i − j is one small product with a
+    constant matrix, and the Toeplitz M is laid out from it by reshaping a tiled vector (no
+    gather). Filtering the band by this one matrix product replaces the band's forward and
+    inverse FFTs (issue 13; `cslx.segmentation.med._lagged`).
+    """
+    f = np.fft.fftfreq(n)
+    ph = np.exp(2j * np.pi * f * delay)
+    if n % 2 == 0:
+        ph[n // 2] = np.cos(np.pi * delay)
+    s = np.fft.ifft(ph).real
+    lags = np.arange(m - 1, -m, -1)  # v[q] = g(m − 1 − q): the lags i − j, reversed
+    S = s[(lags[:, None] - np.arange(W.shape[0])[None, :]) % n]
+    v = jnp.dot(jnp.asarray(S, W.dtype), W, precision=lax.Precision.HIGHEST)
+    # row i of this (m, 2m − 2) view of v tiled starts at v[m − 1 − i]: M_ij = v[m − 1 − i + j]
+    p = 2 * m - 1
+    return jnp.tile(v, m + 1)[m - 1 : m - 1 + m * (p - 1)].reshape(m, p - 1)[:, :m]
+
+
 def centre_output(st: Stats, sign, pb: Problem) -> Float[Array, "s m"]:
     """`shifted_output` of a linear-phase filter of odd length L, from B itself (no FFT).
 

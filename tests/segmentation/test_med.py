@@ -627,3 +627,19 @@ def test_lagged_step_on_every_other_pair_of_segments(axis):
     assert float(strided.kurtosis) == pytest.approx(float(sub.kurtosis), abs=1e-9)
     # half the segments give another step than all of them
     assert float(jnp.max(jnp.abs(strided.filter - lag.filter))) > 1e-6
+
+
+@pytest.mark.parametrize("m, L", [(64, 16), (7, 3), (10, 4), (12, 12)])
+def test_shift_matrix_is_the_fourier_shift(m, L):
+    """`med_fft.shift_matrix` (the lagged band output as one matrix product, issue 13) is
+    `shifted_output` for a static delay: the first m samples of the circular convolution
+    with W, shifted in the Fourier domain, for every segment (an odd count included)."""
+    rng = np.random.default_rng(m + L)
+    X = jnp.asarray(rng.normal(size=(5, m)))
+    W = jnp.asarray(rng.normal(size=L))
+    pb = med_fft.prepare(X, L)
+    for delay in ((L - 1) / 2, 1.25):
+        M = med_fft.shift_matrix(W, delay, m, pb.n)
+        assert M.shape == (m, m)
+        ref = np.asarray(med_fft.shifted_output(W, delay, pb))
+        np.testing.assert_allclose(np.asarray(X @ M.T), ref, atol=1e-12 * np.abs(ref).max())
