@@ -26,11 +26,12 @@ fill 60 + 30 + 17 + 10, `frame_stats`'s strided slice 57, the host side of the c
 against 51 214 optimised HLO lines, kernel sums 3 382 against 3 303 µs in one run); called
 flat, interleaved, 400 frames at load 11, it took 0.36 ms less wall (0.55 ms less CPU) than
 `process_frame`, and the same program returning every `FrameResult` leaf (35 outputs
-instead of 10) 0.10 ms less (CPU 0.13): the outputs' host-side handling, not the kernels.
-`Tracker.step` itself was 0.71 ms slower than `process_frame` there (300 interleaved frames,
-load 10): its NumPy frame is copied to the device (`process_frame` on NumPy frames +1.0 ms)
-and the Kalman filter runs in Python. bench_speed's rows (3.18 against 2.77 ms) were timed
-one after the other, not interleaved.
+instead of 10) 0.10 ms less (CPU 0.13); again at load 8: −0.15 ms wall, −0.98 ms CPU against
++0.08 / −0.04: the outputs' handling on the host side, not the kernels.
+In another run (300 interleaved frames, load 10) `Tracker.step` itself was 0.71 ms slower
+than `process_frame`: its NumPy frame is copied to the device (`process_frame` on NumPy
+frames +1.0 ms) and the Kalman filter runs in Python. bench_speed's rows (3.18 against
+2.77 ms) were timed one after the other, not interleaved.
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.profile_tracking --frames 100
 """
