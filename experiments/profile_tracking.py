@@ -110,7 +110,7 @@ def main(argv=None) -> None:
     leaves0, treedef = jax.tree_util.tree_flatten(state0)
 
     def program(rgb, *state):
-        result, new = pl._process(sensor, config, rgb, treedef.unflatten(state), True)
+        result, new = pl.process_frame(sensor, config, rgb, treedef.unflatten(state))
         if args.program == "small":
             result = (pl.frame_summary(result), result.points_h, result.points_v)
         return (*jax.tree_util.tree_leaves(result), *jax.tree_util.tree_leaves(new))
