@@ -48,6 +48,32 @@ luma on every subsampled frame (q95 V median 0.061, q70 H 0.080 / V 0.079 mm; fl
 as with the gate). Cost: the test 2 ms per frame and stripe (load 20), on every frame; the
 luma's extra second pass where used (tens of ms under that load).
 
+Clipped cores in 4:2:2 (`clipped_pairs`, `PAIR_MARGIN`). A YUYV decoder adds
+the chroma shared by a pixel pair to each pixel's luma; inside a clipped red core, where G
+and B rise steeply towards the white middle, the two pixels of a pair differ in Cr, so one
+of them reads R below the clip level (development frame 7114, saturated in sun: of the
+pixels clipped in the rendered frame, 1 / 5 / 10 / 25 % read at most 239 / 245 / 248 / 253
+after YUYV; single pixels inside the core down to 235). The clipped run then breaks into
+pieces, each filled on its own (`fill_clipped`): several bumps instead of one, and across
+the vertical stripe the linked path left the stripe (both saturated-sunny development
+frames: ≈ 3.5 mm off on 8.8 % of the centres, since issue 11's no-stripe test dropped whole).
+Where the chroma is half-resolution along the profile and full-resolution across it (the
+4:2:2 test: `subsampled` on the profile's axis only), a pixel counts as clipped within
+`PAIR_MARGIN` DN of the clip level, or within `PAIR_GAP` DN between two such
+pixels; the luma is not averaged in there (it was a remedy for the broken core: with the
+core whole it made the V stripe worse). YUYV, V stripe, development frames as above
+(detection %, median / p95 mm, flat RMS / worst px), before → margin 16 with the luma →
+margin 16 without (default): 88.89, 0.049 / 0.207, 0.083 / 0.189 → 99.93, 0.060 / 0.210,
+0.077 / 0.176 → 99.93, 0.040 / 0.169, 0.063 / 0.107. Margin 10 / 13 / 22 without the luma:
+99.85 / 94.39 / 99.93 %, 0.043 / 0.041 / 0.043 mm median, flat 0.046 / 0.060 / 0.055 px —
+at 13 frame 7114 is lost again (a 240 inside its core), so the threshold alone is fragile:
+GAP_RESULTS. JPEG keeps the clip level: 4:2:0 is subsampled both ways, and the
+margin did not pay there (q85 flat walls H / V 0.069 / 0.077 px → 0.074 / 0.083 with the
+luma, 0.075 / 0.071 without; margin 28 lost a flat wall's H stripe): JPEG's quantisation
+takes clipped cores lower (flat wall 61, q85: median 251, 5 % ≤ 223) and rings sunlit
+neighbours up. Rendered, JPEG and YUYV-horizontal outputs are unchanged bit for bit (the
+test gates it; checked on 3 frames × PNG, JPEG q85, YUYV H).
+
 Pure JAX, jit-able.
 """
 
@@ -66,9 +92,14 @@ __all__ = [
     "LINE_STRIDE",
     "LUMA",
     "NYQUIST_FLOOR",
+    "PAIR_GAP",
+    "PAIR_MARGIN",
     "WINDOW",
     "chroma_nyquist",
+    "formats",
+    "clipped_pairs",
     "luma",
+    "pair_margins",
     "saturated_share",
     "second_signal",
     "subsampled",
@@ -87,6 +118,11 @@ LINE_STRIDE = 4
 #: rig's renders (`cslx demo`, 800 × 640, a quieter sensor) score 0.31–0.96 (clean 0.31),
 #: the development frames 1.6–5.0; JPEG 0.000. (0.25 at first: ×1.25 from the demo's.)
 NYQUIST_FLOOR = 0.1
+#: 4:2:2 clipped cores (`clipped_pairs`, module docstring): a channel within `PAIR_MARGIN`
+#: DN of the clip level counts as clipped, within `PAIR_GAP` DN between two such pixels
+#: (0: the 4:2:2 handling off; `PAIR_GAP` ≤ `PAIR_MARGIN`: the margin alone).
+PAIR_MARGIN = 16.0
+PAIR_GAP = 32.0
 
 
 def chroma_nyquist(image, axis: int):
@@ -120,6 +156,18 @@ def subsampled(image, axis: int, floor: float = NYQUIST_FLOOR) -> bool:
     return bool(_subsampled(jnp.asarray(image), floor, axis=axis))
 
 
+def formats(image, axis: int) -> tuple[bool, bool]:
+    """(chroma subsampled along image axis `axis`, and 4:2:2: subsampled along it only and
+    `PAIR_MARGIN` set) of an (H, W, 3) RGB frame (`subsampled`)."""
+    sub = subsampled(image, axis)
+    return sub, sub and bool(PAIR_MARGIN) and not subsampled(image, 1 - axis)
+
+
+def pair_margins() -> tuple[float, float]:
+    """(`PAIR_MARGIN`, `PAIR_GAP`), the static margins of `clipped_pairs`."""
+    return float(PAIR_MARGIN), float(PAIR_GAP)
+
+
 def luma(image):
     """(H, W) JFIF luma Y of an (H, W, 3) RGB frame: the one full-resolution signal of a
     chroma-subsampled frame."""
@@ -142,6 +190,23 @@ def second_signal(image, weights, clip_level, *, axis: int, variant: str, max_ru
     if variant == "luma-div":
         mono = _reflectance_divided(image, mono, clipped)
     return fill_clipped(mono, clipped, axis=axis, max_run=max_run)[0]
+
+
+def clipped_pairs(image, clip_level, *, axis: int, margins: tuple = ()):
+    """`clipped_mask`, or with `margins` (m, g) that of a 4:2:2 frame along image axis `axis`
+    (module docstring): a channel within m DN of `clip_level`, or within g DN with such
+    pixels on both sides along `axis` (a one-pixel gap in a clipped core)."""
+    if not margins:
+        return clipped_mask(image, clip_level)
+    soft = clipped_mask(image, clip_level - margins[0])
+    loose = clipped_mask(image, clip_level - margins[1])
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (1, 1)
+    sp = jnp.pad(soft, pad)
+    n = soft.shape[axis]
+    before = jax.lax.slice_in_dim(sp, 0, n, axis=axis)
+    after = jax.lax.slice_in_dim(sp, 2, n + 2, axis=axis)
+    return soft | (loose & before & after)
 
 
 def saturated_share(saturated, valid) -> float:
