@@ -132,11 +132,15 @@ def test_yuyv_saturated_vertical_stripe(monkeypatch):
     0.097 with the clip level as on a rendered frame (margin 0, the luma averaged in),
     0.039 with the margins; the bound sits between the two."""
     from cslx import segmentation as seg
-    from experiments.chroma_subsampling import yuyv
+    from experiments.chroma_subsampling import through, yuyv
 
     frames = [_sunlit_saturated_vertical(np.random.default_rng(s), 80 + 0.25 * s) for s in (2, 3)]
     frames = [(yuyv(img), truth) for img, truth in frames]
     assert chroma.subsampled(frames[0][0], 1) and not chroma.subsampled(frames[0][0], 0)
+    # 4:2:2 on both stripes' axes; 4:2:0 is no 4:2:2 frame
+    assert chroma.formats(frames[0][0], 0) == (False, True)
+    assert chroma.formats(frames[0][0], 1) == (True, True)
+    assert chroma.formats(through(frames[0][0], "jpeg420-95"), 1) == (True, False)
 
     def rms():
         err = []
