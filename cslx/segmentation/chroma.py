@@ -56,28 +56,30 @@ clipped in the rendered frame, 1 / 5 / 10 / 25 % read at most 239 / 245 / 248 / 
 YUYV; single pixels inside the core down to 235). The clipped run then breaks into pieces,
 each filled on its own (`fill_clipped`): several bumps instead of one, and across the
 vertical stripe the linked path left the stripe (both saturated-sunny development frames: ≈
-3.5 mm off on 8.8 % of the centres, since issue 11's no-stripe test dropped whole: detection
-88.89 %). On a 4:2:2 frame (`formats`: `subsampled` along one axis only), both stripes, a
-pixel counts as clipped within `PAIR_MARGIN` DN of the clip level, or within `PAIR_GAP` DN
-between two such pixels; the luma is not averaged in there (it was a remedy for the broken
-core: with the core whole it made the V stripe worse). YUYV, V stripe, development frames as
-above (detection %, median / p95 mm, flat RMS / worst px), before → margin 16 with the luma
-→ margin 16 without (default): 88.89, 0.049 / 0.207, 0.083 / 0.189 → 99.93, 0.060 / 0.210,
-0.077 / 0.176 → 99.93, 0.040 / 0.169, 0.063 / 0.107. Margin 10 / 13 / 22 without the luma:
-99.85 / 94.39 / 99.93 %, 0.043 / 0.041 / 0.043 mm median, flat 0.046 / 0.060 / 0.055 px — at
-13 frame 7114 is lost again (a 240 inside its core), so the margin alone is fragile. Closing
-one-pixel gaps within `PAIR_GAP` 32 DN (default) made it robust and better on every figure:
-margin 16 / 13, 99.91 / 99.91 %, 0.039 / 0.037 mm median, p95 0.159 / 0.158 mm, flat 0.049 /
-0.049 px RMS, worst 0.081 / 0.080 (no gross centre in any variant). The horizontal stripe
-(its profile full-resolution, but a clipped core's pixels paired with their neighbours along
-it) gains as much: development frames, before → widened test, detection 100 %, median / p95
-0.037 / 0.163 → 0.032 / 0.133 mm, flat RMS / worst 0.092 / 0.136 → 0.035 / 0.060 px. JPEG
-keeps the clip level: 4:2:0 is subsampled both ways, and the margin did not pay there (q85
-flat walls H / V 0.069 / 0.077 px → 0.074 / 0.083 with the luma, 0.075 / 0.071 without;
-margin 28 lost a flat wall's H stripe): JPEG's quantisation takes clipped cores lower (flat
-wall 61, q85: median 251, 5 % ≤ 223) and rings sunlit neighbours up. Rendered and JPEG
-outputs are unchanged bit for bit (the test gates it; checked on PNG and JPEG 4:2:0 q95 /
-q85 / q70, 4:4:4 q70, development frames 7102, 7115, flat walls 61, 62).
+3.5 mm off on 8.8 % of the centres, since then dropped whole by the no-stripe test:
+detection 88.89 %). On a 4:2:2 frame (`formats`: `subsampled` along one axis only), both
+stripes, a pixel counts as clipped within `PAIR_MARGIN` DN of the clip level, or within
+`PAIR_GAP` DN between two such pixels; the luma is not averaged in there (it was a remedy
+for the broken core: with the core whole it made the V stripe worse). YUYV, V stripe,
+development frames as above (detection %, median / p95 mm, flat RMS / worst px), before →
+margin 16 with the luma → margin 16 without (default): 88.89, 0.049 / 0.207, 0.083 / 0.189 →
+99.93, 0.060 / 0.210, 0.077 / 0.176 → 99.93, 0.040 / 0.169, 0.063 / 0.107. Margin 10 / 13 /
+22 without the luma: 99.85 / 94.39 / 99.93 %, 0.043 / 0.041 / 0.043 mm median, flat 0.046 /
+0.060 / 0.055 px — at 13 frame 7114 is lost again (a 240 inside its core), so the margin
+alone is fragile. Closing one-pixel gaps within `PAIR_GAP` 32 DN (default) made it robust
+and better on every figure: margin 16 / 13, 99.91 / 99.91 %, 0.039 / 0.037 mm median, p95
+0.159 / 0.158 mm, flat 0.049 / 0.049 px RMS, worst 0.081 / 0.080 (no gross centre in any
+variant). The horizontal stripe (its profile full-resolution, but a clipped core's pixels
+paired with their neighbours along it) gains as much: development frames, before → widened
+test, detection 100 %, median / p95 0.037 / 0.163 → 0.032 / 0.133 mm, flat RMS / worst 0.092
+/ 0.136 → 0.035 / 0.060 px. JPEG keeps the clip level: 4:2:0 is subsampled both ways, and
+the margin did not pay there (q85 flat walls H / V 0.069 / 0.077 px → 0.074 / 0.083 with the
+luma, 0.075 / 0.071 without; margin 28 lost a flat wall's H stripe): JPEG's quantisation
+takes clipped cores lower (flat wall 61, q85: median 251, 5 % ≤ 223) and rings sunlit
+neighbours up. Rendered and JPEG outputs are unchanged bit for bit (the test gates it;
+checked on PNG and JPEG 4:2:0 q85 for frames 7102, 7115 and flat walls 61, sunny 62; JPEG
+4:2:0 q95 / q70 and 4:4:4 q70 for 7115 and sunny 62). Cost: the test runs on both axes for
+every frame and stripe (2 ms each, load 20).
 
 Pure JAX, jit-able.
 """
