@@ -24,7 +24,8 @@ walls lit by a saturated green laser): RMS (px) of the undistorted centres about
 Held-out seeds (9100–9117, 51–54) are not used.
 
 `--variants` runs the detector with `cslx.segmentation.robust.CHROMA_REFINE` (and
-`CHROMA_SATURATED` after an @) set to other choices (`set_variant`; A/B of the signal);
+`CHROMA_SATURATED` after an @, `chroma.PAIR_MARGIN` after a ~) set to other choices
+(`set_variant`; A/B of the signal);
 rendered frames are cached in `--cache`.
 
 Writes `chroma_subsampling.csv` and `chroma_subsampling.md` in `--out`.
@@ -200,13 +201,17 @@ def _line(r) -> str:
 def set_variant(variant: str):
     """Set `robust.CHROMA_REFINE` (and `CHROMA_SATURATED` after an @) from a variant name:
     "default" leaves them, "none" turns the chroma test off, e.g. "luma@0" uses the luma on
-    every subsampled frame, "luma*0.5@0" averages its centres with the colour space's."""
-    from cslx.segmentation import robust
+    every subsampled frame, "luma*0.5@0" averages its centres with the colour space's, and
+    "luma*0.5~8" sets `chroma.PAIR_MARGIN` to 8 DN (0: off)."""
+    from cslx.segmentation import chroma, robust
 
     if variant == "default":
         return
     name, _, share = variant.partition("@")
+    name, _, margin = name.partition("~")
     name, _, blend = name.partition("*")
+    if margin:
+        chroma.PAIR_MARGIN = float(margin)
     robust.CHROMA_REFINE = None if name == "none" else name
     robust.CHROMA_BLEND = float(blend) if blend else 1.0
     if share:
@@ -224,7 +229,7 @@ def main(
 ):
     """Score every variant × pipeline × stripe; write chroma_subsampling.{csv,md}."""
     from cslx.provenance import provenance, provenance_md, write_csv
-    from cslx.segmentation import robust
+    from cslx.segmentation import chroma, robust
     from cslx.sensor import default_sensor
 
     sensor = default_sensor()
@@ -233,12 +238,14 @@ def main(
     data = load_frames(cache, seed, frames, tuple(flat_seeds), sensor)
     rows = []
     default = robust.CHROMA_REFINE, robust.CHROMA_SATURATED, robust.CHROMA_BLEND
+    margin = chroma.PAIR_MARGIN
     for variant in variants:
         set_variant(variant)
         try:
             rows += evaluate(data, pipelines, sensor, variant)
         finally:
             robust.CHROMA_REFINE, robust.CHROMA_SATURATED, robust.CHROMA_BLEND = default
+            chroma.PAIR_MARGIN = margin
     os.makedirs(out, exist_ok=True)
     write_csv(os.path.join(out, "chroma_subsampling.csv"), rows, FIELDS)
     prov = provenance(

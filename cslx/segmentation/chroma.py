@@ -48,6 +48,39 @@ luma on every subsampled frame (q95 V median 0.061, q70 H 0.080 / V 0.079 mm; fl
 as with the gate). Cost: the test 2 ms per frame and stripe (load 20), on every frame; the
 luma's extra second pass where used (tens of ms under that load).
 
+Clipped cores in 4:2:2 (`clipped_pairs`, `PAIR_MARGIN`). A YUYV decoder adds the chroma
+shared by a pixel pair to each pixel's luma; inside a clipped red core, where G and B rise
+steeply towards the white middle, the two pixels of a pair differ in Cr, so one of them
+reads R below the clip level (development frame 7114, saturated in sun: of the pixels
+clipped in the rendered frame, 1 / 5 / 10 / 25 % read at most 239 / 245 / 248 / 253 after
+YUYV; single pixels inside the core down to 235). The clipped run then breaks into pieces,
+each filled on its own (`fill_clipped`): several bumps instead of one, and across the
+vertical stripe the linked path left the stripe (both saturated-sunny development frames: ≈
+3.5 mm off on 8.8 % of the centres, since then dropped whole by the no-stripe test:
+detection 88.89 %). On a 4:2:2 frame (`formats`: `subsampled` along one axis only), both
+stripes, a pixel counts as clipped within `PAIR_MARGIN` DN of the clip level, or within
+`PAIR_GAP` DN between two such pixels; the luma is not averaged in there (it was a remedy
+for the broken core: with the core whole it made the V stripe worse). YUYV, V stripe,
+development frames as above (detection %, median / p95 mm, flat RMS / worst px), before →
+margin 16 with the luma → margin 16 without (default): 88.89, 0.049 / 0.207, 0.083 / 0.189 →
+99.93, 0.060 / 0.210, 0.077 / 0.176 → 99.93, 0.040 / 0.169, 0.063 / 0.107. Margin 10 / 13 /
+22 without the luma: 99.85 / 94.39 / 99.93 %, 0.043 / 0.041 / 0.043 mm median, flat 0.046 /
+0.060 / 0.055 px — at 13 frame 7114 is lost again (a 240 inside its core), so the margin
+alone is fragile. Closing one-pixel gaps within `PAIR_GAP` 32 DN (default) made it robust
+and better on every figure: margin 16 / 13, 99.91 / 99.91 %, 0.039 / 0.037 mm median, p95
+0.159 / 0.158 mm, flat 0.049 / 0.049 px RMS, worst 0.081 / 0.080 (no gross centre in any
+variant). The horizontal stripe (its profile full-resolution, but a clipped core's pixels
+paired with their neighbours along it) gains as much: development frames, before → widened
+test, detection 100 %, median / p95 0.037 / 0.163 → 0.032 / 0.133 mm, flat RMS / worst 0.092
+/ 0.136 → 0.035 / 0.060 px. JPEG keeps the clip level: 4:2:0 is subsampled both ways, and
+the margin did not pay there (q85 flat walls H / V 0.069 / 0.077 px → 0.074 / 0.083 with the
+luma, 0.075 / 0.071 without; margin 28 lost a flat wall's H stripe): JPEG's quantisation
+takes clipped cores lower (flat wall 61, q85: median 251, 5 % ≤ 223) and rings sunlit
+neighbours up. Rendered and JPEG outputs are unchanged bit for bit (the test gates it;
+checked on PNG and JPEG 4:2:0 q85 for frames 7102, 7115 and flat walls 61, sunny 62; JPEG
+4:2:0 q95 / q70 and 4:4:4 q70 for 7115 and sunny 62). Cost: the test runs on both axes for
+every frame and stripe (2 ms each, load 20).
+
 Pure JAX, jit-able.
 """
 
@@ -66,9 +99,14 @@ __all__ = [
     "LINE_STRIDE",
     "LUMA",
     "NYQUIST_FLOOR",
+    "PAIR_GAP",
+    "PAIR_MARGIN",
     "WINDOW",
     "chroma_nyquist",
+    "formats",
+    "clipped_pairs",
     "luma",
+    "pair_margins",
     "saturated_share",
     "second_signal",
     "subsampled",
@@ -87,6 +125,11 @@ LINE_STRIDE = 4
 #: rig's renders (`cslx demo`, 800 × 640, a quieter sensor) score 0.31–0.96 (clean 0.31),
 #: the development frames 1.6–5.0; JPEG 0.000. (0.25 at first: ×1.25 from the demo's.)
 NYQUIST_FLOOR = 0.1
+#: 4:2:2 clipped cores (`clipped_pairs`, module docstring): a channel within `PAIR_MARGIN`
+#: DN of the clip level counts as clipped, within `PAIR_GAP` DN between two such pixels
+#: (0: the 4:2:2 handling off; `PAIR_GAP` ≤ `PAIR_MARGIN`: the margin alone).
+PAIR_MARGIN = 16.0
+PAIR_GAP = 32.0
 
 
 def chroma_nyquist(image, axis: int):
@@ -120,6 +163,18 @@ def subsampled(image, axis: int, floor: float = NYQUIST_FLOOR) -> bool:
     return bool(_subsampled(jnp.asarray(image), floor, axis=axis))
 
 
+def formats(image, axis: int) -> tuple[bool, bool]:
+    """(chroma subsampled along image axis `axis`; 4:2:2: subsampled along one axis only,
+    and `PAIR_MARGIN` set) of an (H, W, 3) RGB frame (`subsampled`)."""
+    along = (subsampled(image, 0), subsampled(image, 1))
+    return along[axis], bool(PAIR_MARGIN) and along[0] != along[1]
+
+
+def pair_margins() -> tuple[float, float]:
+    """(`PAIR_MARGIN`, `PAIR_GAP`), the static margins of `clipped_pairs`."""
+    return float(PAIR_MARGIN), float(PAIR_GAP)
+
+
 def luma(image):
     """(H, W) JFIF luma Y of an (H, W, 3) RGB frame: the one full-resolution signal of a
     chroma-subsampled frame."""
@@ -142,6 +197,23 @@ def second_signal(image, weights, clip_level, *, axis: int, variant: str, max_ru
     if variant == "luma-div":
         mono = _reflectance_divided(image, mono, clipped)
     return fill_clipped(mono, clipped, axis=axis, max_run=max_run)[0]
+
+
+def clipped_pairs(image, clip_level, *, axis: int, margins: tuple = ()):
+    """`clipped_mask`, or with `margins` (m, g) that of a 4:2:2 frame along image axis `axis`
+    (module docstring): a channel within m DN of `clip_level`, or within g DN with such
+    pixels on both sides along `axis` (a one-pixel gap in a clipped core)."""
+    if not margins:
+        return clipped_mask(image, clip_level)
+    soft = clipped_mask(image, clip_level - margins[0])
+    loose = clipped_mask(image, clip_level - margins[1])
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (1, 1)
+    sp = jnp.pad(soft, pad)
+    n = soft.shape[axis]
+    before = jax.lax.slice_in_dim(sp, 0, n, axis=axis)
+    after = jax.lax.slice_in_dim(sp, 2, n + 2, axis=axis)
+    return soft | (loose & before & after)
 
 
 def saturated_share(saturated, valid) -> float:

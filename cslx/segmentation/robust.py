@@ -123,7 +123,7 @@ averages out): the goal's median is near that floor even without speckle.
    0.0313 / 0.1438 → 0.0297 / 0.1336, 0.0312 / 0.1398 mm; fresh frame 2 (18) 0.0290 /
    0.1397, 0.0358 / 0.1517 → 0.0283 / 0.1346, 0.0346 / 0.1495; +4–5 ms per stripe.
    A saturated path on a chroma-subsampled frame (JPEG, YUYV) is also re-measured on the
-   luma, the two averaged (`CHROMA_REFINE`, evidence in `cslx.segmentation.chroma`).
+   luma, the two averaged (`CHROMA_REFINE`); 4:2:2 widens the clip test (all in `chroma`).
 8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
    strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
    up to 616 "centres" per stripe); no laser-on development frame changes (bit-identical).
@@ -295,12 +295,12 @@ def max_run_for(shape) -> int:
     return int(round(MAX_RUN * max(1.0, min(shape) / SIGMA_MAX_HEIGHT)))
 
 
-@functools.partial(jax.jit, static_argnames=("axis", "auto", "divide"))
-def _prepare(image, clip_level, weights, *, axis: int, auto: bool, divide: bool = True):
+@functools.partial(jax.jit, static_argnames=("axis", "auto", "divide", "pairs"))
+def _prepare(image, clip_level, weights, *, axis: int, auto: bool, divide: bool = True, pairs=()):
     """Monochrome image with clipped runs filled, the filled mask, the clipped-and-unfilled
     mask, the weights used (`weights`, or the clip-aware kurtosis search's when `auto`) and
     the second pass's monochrome image (divided by the reflectance when `divide`)."""
-    clipped = clipped_mask(image, clip_level)
+    clipped = chroma.clipped_pairs(image, clip_level, axis=axis, margins=pairs)
     w = _unclipped_space(image, clipped, axis) if auto else weights.astype(image.dtype)
     raw = image @ w
     run = max_run_for(image.shape[:2])
@@ -415,6 +415,7 @@ def linked_extract(
         weights = parse_space(space) if isinstance(space, str) else space
         auto = isinstance(weights, str)
         weights = np.zeros(3) if auto else np.asarray(weights, float)
+        sub, pairs = chroma.formats(image, axis) if CHROMA_REFINE else (False, False)
         mono, filled, blind, w, mono2 = _prepare(
             image,
             clip_level,
@@ -422,11 +423,11 @@ def linked_extract(
             axis=axis,
             auto=auto,
             divide=REFINE_REFLECTANCE,
+            pairs=chroma.pair_margins() if pairs else (),
         )
-        sub = bool(CHROMA_REFINE) and chroma.subsampled(image, axis)  # not on rendered frames
     else:
         mono, _ = monochrome_for(image, space, stripe)
-        mono2, sub = mono, False
+        mono2, sub, pairs = mono, False, False
         filled = jnp.zeros(mono.shape, bool)
         blind = filled
     sa = SIGMA_ALONG
@@ -440,7 +441,7 @@ def linked_extract(
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
     pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
     signals = [(mono2, 1.0)]
-    if sub and chroma.saturated_share(sat, valid) >= CHROMA_SATURATED:
+    if sub and not pairs and chroma.saturated_share(sat, valid) >= CHROMA_SATURATED:
         kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=max_run_for(image.shape[:2]))
         luma = chroma.second_signal(image, w, clip_level, **kw)
         signals = [(mono2, 1.0 - CHROMA_BLEND), (luma, CHROMA_BLEND)][CHROMA_BLEND == 1 :]
