@@ -48,6 +48,24 @@ luma on every subsampled frame (q95 V median 0.061, q70 H 0.080 / V 0.079 mm; fl
 as with the gate). Cost: the test 2 ms per frame and stripe (load 20), on every frame; the
 luma's extra second pass where used (tens of ms under that load).
 
+Precision weights instead of the fixed 0.5 (tried, not kept; JPEG pipelines, development
+frames as above, one run with the fixed blend as baseline, load ≈ 4). Each path's scatter
+about its smooth path, s² = mean d² / 1.5 of the second difference at lag L (the
+`ridges._path_scatter` estimate, mean square), weights ∝ 1 / s². Per centre (s² over ±40
+centres, L 12) flat q85 H / V RMS 0.069 / 0.077 → 0.078 / 0.068 px (±120: 0.068 / 0.076),
+dropped. Per stripe, q85 flat, L 6 / 12 / 24: 0.067 / 0.073, 0.066 / 0.069, 0.066 / 0.067.
+L 24 on everything, fixed → weighted (flat RMS H / V px; development median / p95 mm H, V):
+q95 0.056 / 0.056 → 0.057 / 0.055, H 0.0494 / 0.242 → 0.0495 / 0.241, V 0.0533 / 0.234
+→ 0.0510 / 0.237; q85 0.069 / 0.077 → 0.066 / 0.067, H 0.0646 / 0.455 → 0.0665 / 0.469,
+V 0.0522 / 0.259 → 0.0546 / 0.269; q70 0.097 / 0.094 → 0.089 / 0.085, H 0.0943 / 0.549
+→ 0.0995 / 0.549 (gross 1.25 → 1.45 %), V 0.0721 / 0.459 → 0.0679 / 0.463; 4:4:4 q70 H
+flat 0.072 → 0.074, V median 0.0602 → 0.0629 (gross 0.30 → 0.56 %). The flat walls gain,
+the development frames lose at q85 and q70 H: the scatter sees noise, not the luma's
+smooth biases (sun, sheen, print). The luma's weight clipped to ≤ 0.5: q85 flat 0.068 /
+0.076, H 0.0659 / 0.469, q70 H 0.1002 / 0.553; to 0.35–0.65: q85 flat 0.066 / 0.070, H
+0.0658 / 0.469, V 0.0544 / 0.268, q70 flat 0.092 / 0.088, H 0.0943 / 0.545 (gross 1.38
+%), V 0.0687 / 0.458 — the flat walls' gain always costs q85's development frames.
+
 Clipped cores in 4:2:2 (`clipped_pairs`, `PAIR_MARGIN`). A YUYV decoder adds the chroma
 shared by a pixel pair to each pixel's luma; inside a clipped red core, where G and B rise
 steeply towards the white middle, the two pixels of a pair differ in Cr, so one of them
