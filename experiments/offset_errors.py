@@ -88,6 +88,59 @@ unchanged by the filter variants); none kept, and their code is not in the tree 
   offset-mean misses 5 / 4 / 1, heading misses 2 / 3 / 0. Fewer or lighter beads make the
   sunny estimate worse, not better: its error is not the white scatter a lower gain
   averages out.
+
+Flank sunny against the other kinds (issue 12, track12n; dev seeds 1201–1206, 7301, 7302,
+7320–7322, 7326, 7327 and fresh 7330–7335, default tracker at 3036b8e; per-frame records
+of `tracking_diagnostics.replay`, re-fits of the stored profiles with `process_frame`):
+
+- on the dev seeds flank sunny is not worse than beside sunny: offset mean averaged over
+  13 flank sunny runs 0.102 mm, 11 beside sunny 0.106; flank clean is not much better
+  (1201 / 1205 / 1206 / 7320 / 7321 clean 0.102 / 0.080 / 0.121 / 0.131 / 0.080, sunny
+  0.139 / 0.126 / 0.100 / 0.144 / 0.149 mm). What sun adds is the bead measurement's
+  scatter (sd per run 0.15–0.54 mm sunny, 0.21–0.30 clean) and, in some runs, a bias: 1201
+  flank sunny measurement mean +0.143 mm (offset mean 0.139); fresh 7330 flank sunny
+  (offset mean / max 0.187 / 0.621 mm, heading 0.435°) +0.17 mm over frames 25–47, while
+  the vertical stripe crossed 10–14 mm beside the bead, on the plate: not the crossing.
+- the crossing on the bead does move the horizontal profile in sun (height against the true
+  cap, points within ±½ width, binned by y − the vertical stripe's y, 25 flank runs): sunny
+  −0.15 to −0.37 mm mean (|r| 0.25–0.63) from −5 to −1 mm and +0.32 / +0.20 at 0 / +1 mm;
+  shadow −0.11 / −0.15 at −2 / −1; clean within ±0.08 mm. Weighting those points down in
+  the bead's fits (offline re-fit of the 25 runs; per-frame sd averaged over runs, and the
+  mean |EMA(0.2)| of the error as a stand-in for the filter): default 0.333 / 0.094 mm;
+  [−2, 2] mm weight 0 0.348 / 0.102; [−5, 1] at 0.1 0.428 / 0.101, at 0 0.491 / 0.121;
+  [−3, 1] at 0.1 0.338 / 0.091. No gain (as track12e's ±2 mm).
+- the bead's shape remembered (tried, code not kept): its cap half-chord and height as the
+  median of the last 10 frames' free cap fits, and only the centre fitted with that shape
+  (Tukey, plate included). The per-frame scatter falls (offline sd 1205 flank sunny 0.476
+  → 0.343, 7302 flank sunny 0.470 → 0.362, 7320 beside sunny 0.612 → 0.307 mm) but where a
+  flank is lost the shape's error becomes a constant shift towards it (the median free fit
+  is 0.1–0.6 mm wider than the bead in sun): mean |EMA| 1201 beside sunny 0.095 → 0.177,
+  1206 beside sunny 0.167 → 0.205, 7321 flank sunny 0.129 → 0.161, 7302 flank shadow 0.126
+  → 0.179 mm; a soft prior (λ 1–300) the same. In the tracker (shape memory 10): 1205 flank
+  sunny offset mean 0.126 → 0.082, but 7302 flank sunny 0.129 → 0.190 mm and heading 0.502
+  → 0.663°; remembering only beads of confidence ≥ 0.45: 1205 0.273, 7320 0.232 mm. With
+  the true shape (oracle) 7302 flank sunny sd 0.307 mm, mean −0.01: the shape estimate is
+  the open step, and a per-run bias costs the offset mean more than scatter does.
+- the tracker's width factor (`KalmanConfig.width_tol`) on the cap model's width instead of
+  the circle's chord (the cap width's departure from its median ranks the bead error a
+  little better: Spearman 0.25 against 0.23, confidence 0.16; RMS error 0.28 mm below 3 %
+  departure, 0.50 at 10–20 %, 0.95 above 20 %). 29 dev runs (13 flank sunny, 6 beside
+  sunny, 4 flank shadow, 4 flank glare, 2 flank clean), offset mean / max averaged, heading
+  mean: flank sunny 0.102 / 0.457 / 0.178 → 0.099 / 0.459 / 0.162, beside sunny 0.136 →
+  0.134, glare 0.092 → 0.095 mm, clean and shadow within 0.001 mm; heading misses 1 → 0
+  (7302 flank sunny 0.502 → 0.48°); 5 runs better, 2 worse. Fresh 7330–7335 flank sunny:
+  0.134 / 0.442 / 0.186 → 0.132 / 0.446 / 0.184, its worst run 7330 0.187 → 0.193 mm.
+  A soft factor 1 / (1 + u²) at tolerance 0.15: dev flank sunny 0.097, fresh 0.126, but
+  7330 0.210 mm and 0.52° (two new misses); the circle at tolerance 0.1: 0.104. Within
+  the runs' scatter: not adopted.
+- the bead's centre from its toes (`WeldConfig.centre` "toes") or the mean of toes and cap,
+  offline re-fit of the same 29 runs (per-frame sd, |mean|, mean |EMA| averaged over the
+  runs): cap 0.353 / 0.043 / 0.104, toes 0.536 / 0.078 / 0.161, mean 0.391 / 0.056 / 0.119
+  mm. Beside sunny the mean does better (mean |EMA| 7320 0.193 → 0.130, 7322 0.135 →
+  0.109, 1205 0.167 → 0.150, 1201 0.095 → 0.082; 1206 0.167 → 0.173) but flank runs much
+  worse, also where the crossing is off the bead (7326 flank sunny 0.036 → 0.068, 7327
+  0.063 → 0.161): in the flank placement the bead lies ≈ 35 mm further to the side of the
+  camera's view and its toes are measured worse, crossing or not. Not adopted.
 """
 
 from __future__ import annotations
