@@ -53,9 +53,10 @@ def data(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    """A JAX compile cache shared by the commands of this module (and their subprocesses)."""
-    return str(tmp_path_factory.mktemp("jax-cache"))
+def cache(jax_cache):
+    """The test session's JAX compile cache, shared with the commands' subprocesses (the
+    tracker's program is compiled once for every test here and in the other worker)."""
+    return jax_cache
 
 
 def _rows(path):

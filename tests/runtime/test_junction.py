@@ -107,10 +107,10 @@ def test_crossing_vmap_and_gradients_finite():
     a, va = vertical_stripe(rng, bar_x=180.0)
     b, vb = vertical_stripe(rng, bar_x=150.0, flank=(1.0, 1.2))
     P, V = jnp.asarray(np.stack([a, b])), jnp.asarray(np.stack([va, vb]))
-    batch = jax.vmap(crossing_feature, in_axes=(0, 0, None))(P, V, WeldConfig())
+    batch = jax.jit(jax.vmap(crossing_feature, in_axes=(0, 0, None)))(P, V, WeldConfig())
     one = crossing(P[1], V[1], WeldConfig())
     assert float(batch.position[1]) == pytest.approx(float(one.position), abs=1e-6)
-    g = jax.grad(lambda p: crossing_feature(p, V[0], WeldConfig()).position)(P[0])
+    g = jax.jit(jax.grad(lambda p: crossing_feature(p, V[0], WeldConfig()).position))(P[0])
     assert np.all(np.isfinite(np.asarray(g)))
 
 
