@@ -18,13 +18,10 @@ $(BIN)/cslx: pyproject.toml
 demo: $(BIN)/cslx
 	$(BIN)/cslx demo --out results/demo
 
-# --dist loadfile: a module's tests run in one worker and share its compiled programs; spread
-# over both workers, a module's parametrised tests compiled the same program twice at once,
-# before the persistent compile cache could share it.
 test: $(BIN)/cslx
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -n auto --dist loadfile -q --durations=15 tests
+	$(BIN)/python -m pytest -n auto -q --durations=15 tests
 	if ls notebooks/*.ipynb >/dev/null 2>&1; then $(BIN)/python -m pytest -n auto -q --nbmake notebooks; fi
 
 clean:
