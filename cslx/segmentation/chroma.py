@@ -121,8 +121,8 @@ __all__ = [
     "PAIR_MARGIN",
     "WINDOW",
     "chroma_nyquist",
-    "formats",
     "clipped_pairs",
+    "formats",
     "luma",
     "pair_margins",
     "saturated_share",
@@ -184,8 +184,14 @@ def subsampled(image, axis: int, floor: float = NYQUIST_FLOOR) -> bool:
 def formats(image, axis: int) -> tuple[bool, bool]:
     """(chroma subsampled along image axis `axis`; 4:2:2: subsampled along one axis only,
     and `PAIR_MARGIN` set) of an (H, W, 3) RGB frame (`subsampled`)."""
-    along = (subsampled(image, 0), subsampled(image, 1))
+    along = np.asarray(_subsampled_both(jnp.asarray(image), NYQUIST_FLOOR)).tolist()
     return along[axis], bool(PAIR_MARGIN) and along[0] != along[1]
+
+
+@jax.jit
+def _subsampled_both(image, floor):
+    """`subsampled` along both image axes in one program and one transfer to the host."""
+    return jnp.stack([chroma_nyquist(image, 0), chroma_nyquist(image, 1)]) < floor
 
 
 def pair_margins() -> tuple[float, float]:
