@@ -295,20 +295,25 @@ def _symmetric_gram(L: int) -> np.ndarray:
 
 def spd_solve(A: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
     """A⁻¹b for a small symmetric positive definite A: Gaussian elimination without pivoting
-    (stable for SPD matrices), unrolled over the static size as whole-row updates, so that
-    it fuses into a few elementwise kernels. The 8×8 linear-phase system of the tracking
-    bands took a Cholesky factorisation and two triangular solves (three library calls,
-    ≈ 15–30 µs a band on this CPU, issue 13); the same solution to rounding."""
+    (stable for SPD matrices) and back substitution, two `lax.fori_loop`s of whole-row
+    updates (with `cslx.environment.small_loops` XLA's CPU backend runs each as one
+    function). The 8×8 linear-phase system of the tracking bands took a Cholesky
+    factorisation and two triangular solves (three library calls, ≈ 15–30 µs a band on this
+    CPU, issue 13); the same solution to rounding."""
     n = A.shape[0]
     idx = jnp.arange(n)
-    for k in range(n):
+
+    def eliminate(k, Ab):
+        A, b = Ab
         f = jnp.where(idx > k, A[:, k] / A[k, k], 0.0)
-        A = A - f[:, None] * A[k][None, :]
-        b = b - f * b[k]
-    x = jnp.zeros_like(b)
-    for k in reversed(range(n)):  # x is zero at and below k: the sum runs over j > k only
-        x = jnp.where(idx == k, (b[k] - jnp.sum(A[k] * x)) / A[k, k], x)
-    return x
+        return A - f[:, None] * A[k][None, :], b - f * b[k]
+
+    def substitute(j, x):  # x is zero at and below k: the sum runs over the solved entries
+        k = n - 1 - j
+        return jnp.where(idx == k, (b[k] - jnp.sum(A[k] * x)) / A[k, k], x)
+
+    A, b = lax.fori_loop(0, n, eliminate, (A, b))
+    return lax.fori_loop(0, n, substitute, jnp.zeros_like(b))
 
 
 def toeplitz(r: Float[Array, " L"]) -> Float[Array, "L L"]:
