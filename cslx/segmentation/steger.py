@@ -235,17 +235,14 @@ def _select(
     reductions (the column maxima with the frame's mean |λ|, and the chosen points' sums)
     rather than four (the frame's maximum, the mean, the maxima of the thresholded scores,
     the sums), each of which XLA's CPU backend fused with its own copy of the eigen-
-    decomposition and filters: the same centres bit for bit (issue 13; A/B in
-    experiments.ab_tracking).
+    decomposition and filters: the same centres bit for bit (issue 13, against the four
+    passes on tracking bands of the sunny video: 64×640 and 480×128 alone within ±0.04 ms,
+    the tracking program's Steger kernels' p10 sum 866–948 → 726–885 µs over three
+    profiles each, load 5–13; experiments/profile_tracking.py).
     """
     n_along = ridge.nv if axis == 0 else ridge.nu
     steep_ok = jnp.abs(n_along) >= min_cos
-    candidate = (
-        ridge.geometric
-        & steep_ok
-        & (ridge.strength >= min_strength)
-        & (ridge.strength > 0)
-    )
+    candidate = ridge.geometric & steep_ok & (ridge.strength >= min_strength) & (ridge.strength > 0)
     best = jnp.max(jnp.where(candidate, ridge.strength, 0.0), axis=axis)
     if strongest is None:
         strongest = lax.stop_gradient(jnp.max(best))
