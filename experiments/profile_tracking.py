@@ -33,6 +33,27 @@ than `process_frame`: its NumPy frame is copied to the device (`process_frame` o
 frames +1.0 ms) and the Kalman filter runs in Python. bench_speed's rows (3.18 against
 2.77 ms) were timed one after the other, not interleaved.
 
+Acted on (issue 13, speed13p; 100 traced frames each, load 5–13, so inflated): band MED's
+single-vector FFTs (a filter's spectrum, the short inverse transforms, the linear-phase sign)
+as products with constant DFT matrices and its 8×8 linear-phase system by elimination in
+two small loops (`cslx.segmentation.med_fft.filter_spectrum`, `irfft_head`, `spd_solve`:
+no FFT, Cholesky or triangular-solve library call on the bands; 10 FFTs and 6 LAPACK calls a
+frame gone, ≈ 85 µs p10 of them), and Steger's thresholds on the column maxima (two passes
+over the ridge values instead of four, `cslx.segmentation.steger._select`): the ``jit(_med)``
+group's p10 sum 690, 760, 793 → 565, 595, 652 µs (the three runs of each, not paired),
+Steger's 866, 902, 948 → 726, 851, 885 µs, all kernels 3255, 3613, 3880 → 3041, 3157,
+3429 µs. `experiments.ab_tracking --rev main` at load 8–11 (600 interleaved frames): median
+11.02 → 9.42 ms, p10 7.43 → 7.17, process CPU 8.10 → 7.71 ms, paired median −0.03 ms (the
+load's quartiles ±3 ms: no wall-time figure on a quiet machine yet). Centres within 3e-5 px
+(one float32 ulp at 256–512 px) of the FFT path's, band − full-frame agreement unchanged
+(dev video seeds 0 / 1: 0.0204 / 0.0107 px). Tried and not kept: the fill's scan unrolled 4
+or 8 steps a trip inside its one function (band cuts alone within ±0.04 ms), Steger's
+eigenvector left unnormalised with its tests multiplied out (no gain alone), the band of
+rows' output product as ``dot(X, Mᵀ)ᵀ`` (the same time). The host side grows with the
+outputs: a trivial program returning 35 arrays took ≈ 170 µs a call against 12 µs for one
+array of the same data (load 10), ≈ 4.5 µs an output, which is where `process_frame`'s 35
+leaves cost beyond the tracker's 10.
+
     OPENBLAS_NUM_THREADS=1 python -m experiments.profile_tracking --frames 100
 """
 

@@ -157,8 +157,50 @@ class Stats(eqx.Module):
     bb: Float[Array, "p n"]
 
 
+#: FFT lengths up to this take a filter's spectrum and the short inverse transforms of the
+#: MED step as products with constant DFT matrices (the tracking bands: n = 80, 144).
+DFT_MATRIX_MAX = 256
+
+
+def _dft_matrix(L: int, n: int) -> np.ndarray:
+    """(L, 2n) [cos | −sin] of 2πkf/n: W @ it is the real and imaginary part of fft(W, n)."""
+    ang = 2 * np.pi * np.outer(np.arange(L), np.arange(n)) / n
+    return np.concatenate([np.cos(ang), -np.sin(ang)], axis=1)
+
+
+def _irdft_head(n: int, L: int) -> np.ndarray:
+    """(2(n//2 + 1), L) matrix: [Re G, Im G] @ it is irfft(G, n)[:L] (imaginary parts of the
+    DC and Nyquist bins ignored, as `jnp.fft.irfft` does)."""
+    f = np.arange(n // 2 + 1)
+    a = np.where((f == 0) | (2 * f == n), 1.0, 2.0) / n
+    ang = 2 * np.pi * np.outer(f, np.arange(L)) / n
+    sin = np.sin(ang)
+    sin[(f == 0) | (2 * f == n)] = 0.0
+    return np.concatenate([a[:, None] * np.cos(ang), -a[:, None] * sin], axis=0)
+
+
+def _dot(x, M):
+    return jnp.dot(x, jnp.asarray(M, x.dtype), precision=lax.Precision.HIGHEST)
+
+
 def filter_spectrum(W: Float[Array, " L"], n: int) -> Complex[Array, " n"]:
-    return jnp.fft.fft(W, n=n)
+    """fft(W, n); for n ≤ `DFT_MATRIX_MAX` one product with a constant DFT matrix (an FFT
+    library call on one short vector costs more than the product, issue 13)."""
+    if n > DFT_MATRIX_MAX:
+        return jnp.fft.fft(W, n=n)
+    y = _dot(W, _dft_matrix(W.shape[0], n))
+    return lax.complex(y[:n], y[n:])
+
+
+def irfft_head(G: Array, n: int, L: int) -> Float[Array, " L"]:
+    """``jnp.fft.irfft(G, n)[:L]`` for one (n//2 + 1,) half-spectrum, real or complex; for
+    n ≤ `DFT_MATRIX_MAX` one product with a constant matrix (`filter_spectrum`'s reason)."""
+    if n > DFT_MATRIX_MAX:
+        return jnp.fft.irfft(G, n=n)[:L]
+    M = _irdft_head(n, L)
+    if not jnp.iscomplexobj(G):
+        return _dot(G, M[: n // 2 + 1])
+    return _dot(jnp.concatenate([G.real, G.imag]), M)
 
 
 def stats(W: Float[Array, " L"], pb: Problem) -> Stats:
@@ -178,11 +220,11 @@ def stats(W: Float[Array, " L"], pb: Problem) -> Stats:
     )
 
 
-def weighted_autocorrelation(w: Float[Array, " s2"], pb: Problem) -> Float[Array, " n"]:
-    """r(τ) = Σ_j w_j Σ_i X_ij X_{i+τ,j} for all circular lags (n ≥ m + L − 1: no wrap)."""
+def weighted_autocorrelation(w: Float[Array, " s2"], pb: Problem) -> Float[Array, " L"]:
+    """r(τ) = Σ_j w_j Σ_i X_ij X_{i+τ,j} for the lags τ = 0..L − 1 (n ≥ m + L − 1: no wrap)."""
     p = pb.Pa.shape[0]
     P = w[:p] @ pb.Pa + w[p:] @ pb.Pb
-    return jnp.fft.irfft(P, n=pb.n)
+    return irfft_head(P, pb.n, pb.L)
 
 
 def symmetric_basis(L: int) -> np.ndarray:
@@ -217,16 +259,61 @@ def update(
     Cb = jnp.fft.rfft(st.bb * st.bb * st.bb, n=n, axis=-1)
     p = pb.Xa.shape[0]
     G = st.v[:p] @ (jnp.conj(pb.Xa) * Ca) + st.v[p:] @ (jnp.conj(pb.Xb) * Cb)
-    bvec = jnp.fft.irfft(G, n=n)[:L]
-    r = weighted_autocorrelation(st.w, pb)[:L]
+    bvec = irfft_head(G, n, L)
+    r = weighted_autocorrelation(st.w, pb)
     r = r.at[0].multiply(1 + loading)  # R + loading·R_00·I: the same Toeplitz form
     if symmetric:
-        P = jnp.asarray(symmetric_basis(L), r.dtype)
-        h = jsl.cho_solve(jsl.cho_factor(P.T @ toeplitz(r) @ P, lower=True), P.T @ bvec)
-        x = P @ h
+        P = symmetric_basis(L)
+        if P.shape[1] <= SMALL_SOLVE:
+            # PᵀR P as one product of r with a constant (its entries are sums of r's lags)
+            # and the system solved by unrolled elimination: no gather, no library calls
+            A = _dot(r, _symmetric_gram(L)).reshape(P.shape[1], P.shape[1])
+            x = _dot(spd_solve(A, _dot(bvec, P)), P.T)
+        else:
+            Pj = jnp.asarray(P, r.dtype)
+            h = jsl.cho_solve(jsl.cho_factor(Pj.T @ toeplitz(r) @ Pj, lower=True), Pj.T @ bvec)
+            x = Pj @ h
     else:
         x = toeplitz_solve(r, bvec)
     return x / jnp.linalg.norm(x), st
+
+
+#: Linear-phase systems of up to this many unknowns are solved by `spd_solve`.
+SMALL_SOLVE = 16
+
+
+def _symmetric_gram(L: int) -> np.ndarray:
+    """(L, h²) constant G with r @ G = vec(Pᵀ R P), R_kl = r(|k − l|), P `symmetric_basis`."""
+    P = symmetric_basis(L)
+    h = P.shape[1]
+    lag = np.abs(np.arange(L)[:, None] - np.arange(L)[None, :])
+    G = np.zeros((L, h * h))
+    for tau in range(L):
+        G[tau] = (P.T @ (lag == tau).astype(float) @ P).ravel()
+    return G
+
+
+def spd_solve(A: Float[Array, "n n"], b: Float[Array, " n"]) -> Float[Array, " n"]:
+    """A⁻¹b for a small symmetric positive definite A: Gaussian elimination without pivoting
+    (stable for SPD matrices) and back substitution, two `lax.fori_loop`s of whole-row
+    updates (with `cslx.environment.small_loops` XLA's CPU backend runs each as one
+    function). The 8×8 linear-phase system of the tracking bands took a Cholesky
+    factorisation and two triangular solves (three library calls, ≈ 15–30 µs a band on this
+    CPU, issue 13); the same solution to rounding."""
+    n = A.shape[0]
+    idx = jnp.arange(n)
+
+    def eliminate(k, Ab):
+        A, b = Ab
+        f = jnp.where(idx > k, A[:, k] / A[k, k], 0.0)
+        return A - f[:, None] * A[k][None, :], b - f * b[k]
+
+    def substitute(j, x):  # x is zero at and below k: the sum runs over the solved entries
+        k = n - 1 - j
+        return jnp.where(idx == k, (b[k] - jnp.sum(A[k] * x)) / A[k, k], x)
+
+    A, b = lax.fori_loop(0, n, eliminate, (A, b))
+    return lax.fori_loop(0, n, substitute, jnp.zeros_like(b))
 
 
 def toeplitz(r: Float[Array, " L"]) -> Float[Array, "L L"]:
@@ -292,12 +379,18 @@ def centre_sign(W: Float[Array, " L"], w: Float[Array, " s2"], pb: Problem):
 
     A symmetric filter delays every frequency by (L − 1)/2 exactly; the sign is chosen so
     that c((L−1)/2) = Σ_j w_j Σ_i B_{i+(L−1)/2, j} X_ij > 0 (the stripe stays bright).
+    The correlation is c(t) = Σ_k W_k r(t − k) with r the weighted autocorrelation, even in
+    its lag: at the centre it is W · (r(|(L−1)/2 − k|) + r(|L/2 − k|)), taken from the r of
+    `update` (the same operations on the same weights, computed once), not through an FFT
+    pair (issue 13).
     """
-    n, L = pb.n, pb.L
-    p = pb.Pa.shape[0]
-    P = w[:p] @ pb.Pa + w[p:] @ pb.Pb
-    c = jnp.fft.irfft(jnp.fft.rfft(W, n=n) * P, n=n)
-    mid = c[(L - 1) // 2] + c[L // 2]
+    L = pb.L
+    r = weighted_autocorrelation(w, pb)
+    k = np.arange(L)
+    Q = np.zeros((L, L))
+    for t in ((L - 1) // 2, L // 2):
+        Q[k, np.abs(t - k)] += 1.0
+    mid = jnp.dot(W, _dot(r, Q.T), precision=lax.Precision.HIGHEST)
     return jnp.where(mid < 0, -1.0, 1.0).astype(W.dtype)
 
 

@@ -643,3 +643,37 @@ def test_shift_matrix_is_the_fourier_shift(m, L):
         assert M.shape == (m, m)
         ref = np.asarray(med_fft.shifted_output(W, delay, pb))
         np.testing.assert_allclose(np.asarray(X @ M.T), ref, atol=1e-12 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("n, L", [(80, 16), (144, 16), (45, 7), (720, 240)])
+def test_short_transforms_are_numpy_ffts(n, L):
+    """The band MED step's short transforms as constant-matrix products (n ≤
+    `med_fft.DFT_MATRIX_MAX`; issue 13), or FFTs above it: a filter's spectrum, the first L
+    samples of an inverse real FFT (complex and real half-spectra, odd n included), the
+    linear-phase system of `update` and its solve, and the sign of `centre_sign`."""
+    rng = np.random.default_rng(n + L)
+    W = rng.normal(size=L)
+    spec = np.asarray(med_fft.filter_spectrum(jnp.asarray(W), n))
+    np.testing.assert_allclose(spec, np.fft.fft(W, n), atol=1e-12 * L)
+    f = n // 2 + 1
+    G = rng.normal(size=f) + 1j * rng.normal(size=f)
+    for g in (G, G.real):
+        got = np.asarray(med_fft.irfft_head(jnp.asarray(g), n, L))
+        np.testing.assert_allclose(got, np.fft.irfft(g, n)[:L], atol=1e-14 * f)
+    r = np.exp(-np.arange(L) / 3.0) + 1e-3
+    P = med_fft.symmetric_basis(L)
+    gram = (jnp.asarray(r) @ jnp.asarray(med_fft._symmetric_gram(L))).reshape(P.shape[1], -1)
+    A = P.T @ np.asarray(med_fft.toeplitz(jnp.asarray(r))) @ P
+    np.testing.assert_allclose(np.asarray(gram), A, atol=1e-13)
+    b = rng.normal(size=P.shape[1])
+    x = np.asarray(med_fft.spd_solve(jnp.asarray(A), jnp.asarray(b)))
+    np.testing.assert_allclose(x, np.linalg.solve(A, b), rtol=1e-9, atol=1e-9 * np.abs(x).max())
+    X = jnp.asarray(rng.normal(size=(6, n - L + 1)))
+    pb = med_fft.prepare(X, L)
+    w = jnp.asarray(rng.uniform(0.5, 2.0, size=2 * pb.Pa.shape[0]))
+    Pw = np.asarray(w[: pb.Pa.shape[0]] @ pb.Pa + w[pb.Pa.shape[0] :] @ pb.Pb)
+    Ws = W + W[::-1]
+    c = np.fft.irfft(np.fft.rfft(Ws, pb.n) * Pw, pb.n)
+    mid = c[(L - 1) // 2] + c[L // 2]
+    assert float(med_fft.centre_sign(jnp.asarray(Ws), w, pb)) == (1.0 if mid >= 0 else -1.0)
+    assert float(med_fft.centre_sign(-jnp.asarray(Ws), w, pb)) == (-1.0 if mid > 0 else 1.0)

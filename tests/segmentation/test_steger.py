@@ -211,3 +211,41 @@ def test_hessian_from_one_2d_pad_equals_padding_each_pass(shape, sigma):
         for a, b in zip(jax.jit(old)(image), jax.jit(new)(image), strict=True):
             scale = float(jnp.max(jnp.abs(a)))
             np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-5, atol=1e-6 * scale)
+
+
+@pytest.mark.parametrize("threshold, min_strength, snr", [(0.1, 0.0, 5.0), (0.5, 0.02, 2.0)])
+@pytest.mark.parametrize("axis", [0, 1])
+def test_thresholds_on_column_maxima_are_the_per_pixel_rule(threshold, min_strength, snr, axis):
+    """The thresholds taken on the columns' strongest candidates (issue 13) select the same
+    centres as the per-pixel rule: accept a geometric, steep point of strength
+    ≥ threshold × the frame's strongest, ≥ snr × mean |λ|, ≥ min_strength and > 0, then the
+    strongest accepted one per column, ties averaged."""
+    from cslx.segmentation.steger import _ridge
+
+    rng = np.random.default_rng(7 + axis)
+    img = gaussian(ROWS, 40.0 + 6 * np.sin(COLS / 17.0), 2.0) + rng.normal(0, 0.05, (H, W))
+    img[60:70, 30:90] += 0.4 * gaussian(ROWS[60:70], 64.0, 1.5)  # a weaker second ridge
+    img = jnp.asarray(img if axis == 0 else img.T)
+    got = steger_centres(img, sigma=2.0, axis=axis, threshold=threshold,
+                         min_strength=min_strength, snr=snr)  # fmt: skip
+    rd = jax.tree_util.tree_map(np.asarray, _ridge(img, 2.0, jnp.asarray(0.6, img.dtype)))
+    min_cos = np.cos(np.radians(60.0))
+    n_along = rd.nv if axis == 0 else rd.nu
+    steep = np.abs(n_along) >= min_cos
+    strongest = np.max(np.where(rd.geometric & steep, rd.strength, 0.0))
+    accept = (rd.geometric & steep & (rd.strength >= threshold * strongest)
+              & (rd.strength >= min_strength) & (rd.strength >= snr * rd.scale)
+              & (rd.strength > 0))  # fmt: skip
+    score = np.where(accept, rd.strength, 0.0)
+    best = score.max(axis=axis)
+    chosen = accept & (score == np.expand_dims(best, axis))
+    index = np.arange(img.shape[axis], dtype=float)
+    index = index[:, None] if axis == 0 else index[None, :]
+    offset = rd.t / np.where(steep, n_along, 1.0)
+    count = chosen.sum(axis=axis)
+    pos = np.where(chosen, index + offset, 0.0).sum(axis=axis) / np.maximum(count, 1)
+    np.testing.assert_array_equal(np.asarray(got.valid), count > 0)
+    assert (count > 0).sum() > img.shape[1 - axis] // 2  # the stripe is found
+    np.testing.assert_allclose(np.asarray(got.pos)[count > 0], pos[count > 0], atol=1e-12)
+    # the reference's ridge is compiled apart: its values may differ in the last bit
+    np.testing.assert_allclose(np.asarray(got.strength), np.where(count > 0, best, 0.0), rtol=1e-12)
