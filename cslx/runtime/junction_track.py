@@ -47,9 +47,11 @@ rule; the paper gives none):
 - along the bar (`bar_slope`, `KalmanConfig.junction_bar_slope`): each sighting is also
   kept as the plate point (x_r, y_r) where the stripe crossed the bar's centre line,
   carried by odometry in both coordinates; once the held junction's points spread ≥ 3 mm
-  across the stripe (the robot turned: ≈ 1° at 180 mm), the reported position is where
-  a Tukey-robust line through them (the bar, `robust_line`) meets the stripe's current line
-  on the wall, not their median x_r. The x_r-only carry assumes the bar is perpendicular
+  across the stripe (the robot turned: ≈ 1° at 180 mm) and the slope of a Tukey-robust
+  line through them (the bar, `robust_line`) exceeds twice its standard deviation, the
+  reported position is where that line meets the stripe's current line on the wall, not
+  their median x_r (without the slope test, 2 of 51 dev runs, 1203 and 7326 beside sunny,
+  gained a false T frame: the first line through 5–6 scattered sightings, 3.9 mm short). The x_r-only carry assumes the bar is perpendicular
   to the stripe in the current robot frame; a bar at 60° or 120° to the stem, or any bar
   while the robot turns, slides along the stripe instead. Issue 12 audit
   (experiments/tracking_generality.py, fresh seed 7400, clean, 40 frames): T at 60° the
@@ -152,10 +154,12 @@ class JunctionTrack:
         y0, m = self.stripe_line
         # x = a + k (y − y_s), Tukey-robust, then the intersection with y = y0 + m x
         ys = y0 + m * float(np.median(pts[:, 0]))
-        a, th, _ = robust_line(pts[:, 1], pts[:, 0], np.ones(len(pts)), ys, 0.5, 3.0)
+        a, th, sd = robust_line(pts[:, 1], pts[:, 0], np.ones(len(pts)), ys, 0.5, 3.0)
         if not (math.isfinite(a) and math.isfinite(th)):
             return math.nan
         k = math.tan(th)
+        if abs(k) < 2.0 * sd * (1.0 + k * k):  # sd of tan θ: no slope beyond its noise
+            return math.nan  # the median: a bar ⟂ the stripe
         # a + k (y0 + m x − ys) = x
         den = 1.0 - k * m
         return (a + k * (y0 - ys)) / den if abs(den) > 0.1 else math.nan
