@@ -47,17 +47,18 @@ rule; the paper gives none):
 - along the bar (`bar_slope`, `KalmanConfig.junction_bar_slope`): each sighting is also
   kept as the plate point (x_r, y_r) where the stripe crossed the bar's centre line,
   carried by odometry in both coordinates; once the held junction's points spread ≥ 3 mm
-  across the stripe (the robot turned: ≈ 1° at 180 mm) and the slope of a Tukey-robust
+  across the stripe (the robot turned: ≈ 1° at 180 mm) and the slope k of a Tukey-robust
   line through them (the bar, `robust_line`) exceeds twice its standard deviation, the
   reported position is where that line meets the stripe's current line on the wall, not
-  their median x_r (without the slope test, 2 of 51 dev runs, 1203 and 7326 beside sunny,
-  gained a false T frame: the first line through 5–6 scattered sightings, 3.9 mm short). The x_r-only carry assumes the bar is perpendicular
-  to the stripe in the current robot frame; a bar at 60° or 120° to the stem, or any bar
-  while the robot turns, slides along the stripe instead. Issue 12 audit
+  their median x_r. The x_r-only carry assumes the bar is perpendicular to the stripe in
+  the current robot frame; a bar at 60° or 120° to the stem, or any bar while the robot
+  turns, slides along the stripe instead. Issue 12 audit
   (experiments/tracking_generality.py, fresh seed 7400, clean, 40 frames): T at 60° the
   report 5–9 mm behind the sightings, T recall 21.9 %, 16 false T frames; simulated
-  (tests/runtime/test_oblique_t.py, 0.25° of turn a frame, 0.5 mm scatter): max error at
-  60° 8.6 → 0.84 mm, at 90° 2.1 → 0.84 mm.
+  (tests/runtime/test_oblique_t.py, 0.25° of turn a frame, 0.5 mm scatter): max / mean
+  error at 60° 8.6 / 4.1 → 1.6 / 0.28 mm, at 90° 2.1 / 0.81 → 0.84 / 0.28 mm. Without
+  the slope test 2 of 51 dev runs (1203 and 7326 beside sunny) gained a false T frame:
+  the first line through 12 sightings scattered ±3 mm, k 1.36 ± 0.82, 3.9 mm short.
 """
 
 from __future__ import annotations
