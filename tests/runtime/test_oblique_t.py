@@ -59,20 +59,20 @@ def _approach(bar_deg: float, bar_slope: bool, noise: float = 0.5) -> np.ndarray
 
 def test_oblique_bar_followed_while_turning():
     # 60°: without the bar's slope the held median falls behind the sightings (8.6 mm after
-    # 7° of turn, then out of tolerance of them: the report lapses); with it 0.28 mm on
-    # average, 1.6 mm at most (the median's lag before the slope is significant; bound
-    # 2 mm, under the 3 mm)
+    # 7° of turn, then out of tolerance of them: the report lapses); with it 0.35 mm on
+    # average, 2.0 mm at most (the median's lag before 10 sightings show a significant
+    # slope; bound 2.5 mm, under the 3 mm)
     plain, sloped = _approach(60.0, False), _approach(60.0, True)
     assert plain.max() > 5.0
     assert len(sloped) >= 36
-    assert sloped.max() < 2.0
+    assert sloped.max() < 2.5
     assert sloped.mean() < 0.5
 
 
 def test_square_bar_with_slope():
     # 90°: in the robot frame the bar turns with the robot (10° over the run); the median
     # lags ≈ 2 mm by the end (0.8 mm mean), the line through the plate points stays within
-    # the scatter
+    # the scatter (0.5 mm)
     plain, sloped = _approach(90.0, False), _approach(90.0, True)
     assert len(sloped) == len(plain) >= 36
     assert sloped.max() < 1.5
