@@ -27,8 +27,12 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   wider than the stem, before the junction and the largest-bead rule took it (the gate
   rejected it 7 frames, then restarted there; `cslx.runtime.bead_near`), and the junction
   held at the median of odometry-carried x_r slid off the bar as the robot turned
-  (`cslx.runtime.junction_track`, ``bar_slope``). After: 0.138 / 0.28, 96.9 % / 1 and
-  0.135 / 0.28, 100 % / 0; sunny 60° 0.162 / 0.47, 100 % / 0.
+  (`cslx.runtime.junction_track`, ``bar_slope``). After (seeds 7400 / 7401): 60°
+  0.138 / 0.28, 96.9 % / 1 and 0.078 / 0.25, 97.3 % / 0 (before at 7401: 3.61 / 49.1,
+  83.8 % / 5); 120° 0.135 / 0.28, 66.7 % / 3 and 0.078 / 0.25, 88.9 % / 0 (before at
+  7401: 3.92 / 53.2, 88.9 % / 0): the bar is in view 9 frames only, too few for the
+  bar's line (10 sightings; with 5 the 7400 run gave 100 % / 0 but a dev run a false T);
+  sunny 60° at 7400 0.162 / 0.47, 100 % / 0 (5-sighting version).
 - the vertical stripe on the followed bead's toe (0.55 widths from its centre line): 7
   false T frames (not studied further).
 - the weld 70 mm to the robot's right (its toe at the image's edge): an estimate on 97.5 %
