@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-__all__ = ["KalmanConfig", "WeldLineFilter", "carry", "robust_line"]
+__all__ = ["KalmanConfig", "WeldLineFilter", "carry", "robust_line", "width_weight"]
 
 
 def carry(x, y, d: float, delta: float):
@@ -180,12 +180,23 @@ class KalmanConfig:
     # later, T recall 100 → 96.9 % in 1201 and 1202 flank sunny, 96.6 → 93.1 % in 7301
     # beside clean, 96.9 → 93.8 % in 1203 flank sunny and shadow (minimum 93.1 %)
     junction_confirm_min: int = 3
+    # the held junction's position from the line through its sightings' plate points (the
+    # crossing weld's centre line, odometry-carried) where it meets the stripe now, not the
+    # median of their x_r (`JunctionTrack`, `bar_slope`): a bar at an angle other than 90°
+    # slides along the stripe when the robot turns (issue 12 audit, fresh seed 7400, T at
+    # 60°: the reported T up to 9 mm behind the sightings)
+    junction_bar_slope: bool = True
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
     # u·width_tol of it (|u| > 1) has its confidence divided by u²: in sunlight a glint that
     # hides a flank makes the bead look narrower or merges it with the plate (widths of 10 to
     # 34 mm for a 14 mm bead at dev seed 1201), and those are the frames whose position is off
     width_tol: float = 0.2
     width_memory: int = 20
+    # > 0: on a frame whose bead the gate would reject, refit the bead on the horizontal
+    # stripe's points within (half the recent median width + this) of the predicted line and
+    # take it if the gate accepts it (`cslx.runtime.bead_near`: the profile's largest bead is
+    # another weld, e.g. the bar of a T at 60° or 120°; issue 12 audit there). 0: off
+    near_refit_mm: float = 8.0
     # fuse the heading the vertical stripe sees (`weld.heading_from_vertical`). Off: along the
     # bead's flank (dev seed 1201, odometry) the heading error went 0.51° → 1.34° (clean),
     # 0.60° → 1.70° (sun); beside the weld it never sees the weld's direction
@@ -424,6 +435,15 @@ class WeldLineFilter:
         self.P = 0.5 * (self.P + self.P.T)
         return True
 
+    def innovation_ok(self, x_c: float, y_c: float, confidence: float) -> bool:
+        """Whether `update` would accept this centre (the filter started and inside the gate)."""
+        if self.x is None:
+            return True
+        H = np.array([1.0, x_c - self.x_ref])
+        S = H @ self.P @ H + self.c.sigma_meas**2 / max(confidence, 0.05)
+        nu = y_c - H @ self.x
+        return bool(nu * nu <= self.c.gate**2 * S)
+
     def update(self, x_c: float, y_c: float, confidence: float) -> bool:
         """Fuse one bead centre; False if gated out (the filter may restart)."""
         c = self.c
@@ -445,6 +465,17 @@ class WeldLineFilter:
         self.rejected = 0
         self.pending = []
         return True
+
+
+def width_weight(width: float, widths, tol: float) -> float:
+    """Weight of a bead of this width against the recent accepted ones (`KalmanConfig`
+    `width_tol`): 1 within tol · m of their median m (or with fewer than 5 of them),
+    else 1 / u², u = (width − m) / (tol · m)."""
+    if len(widths) < 5 or not math.isfinite(width):
+        return 1.0
+    m = float(np.median(widths))
+    u = (width - m) / (tol * m)
+    return 1.0 if abs(u) <= 1.0 else 1.0 / (u * u)
 
 
 def robust_line(

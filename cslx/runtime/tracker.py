@@ -45,6 +45,11 @@ filter over s = (e, θ):
   while the heading is still the old weld's, ≈ 90° off) the restart takes the line's
   heading and its standard deviation instead (`WeldLineFilter._restart_heading`).
 
+- the bead near the line: on a frame whose bead the gate would reject, the bead is refitted
+  on the profile without the other beads far from the predicted line
+  (`cslx.runtime.bead_near`, `near_refit_mm`): the pipeline takes the largest bead, which
+  beside an oblique T's bar is the bar.
+
 - direct heading (`use_vertical_heading`): where the vertical stripe sees the weld's
   direction (`cslx.runtime.weld.heading_from_vertical`), that heading is fused as a
   measurement of θ (standard deviation at least `sigma_heading_floor_deg`, gated like the
@@ -110,7 +115,7 @@ import numpy as np
 
 from ..config import MOTION
 from .junction_track import JunctionTrack, cut_by_view
-from .line_filter import KalmanConfig, WeldLineFilter
+from .line_filter import KalmanConfig, WeldLineFilter, width_weight
 from .path_heading import PathHeading
 from .step_program import step_program
 from .stripe_colour import choose_weights
@@ -403,6 +408,7 @@ class Tracker:
             keep_clear=c.junction_keep_clear,
             fuse=c.junction_fuse,
             confirm_min=c.junction_confirm_min,
+            bar_slope=c.junction_bar_slope,
         )
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
@@ -414,18 +420,17 @@ class Tracker:
     def _width_factor(self, width: float) -> float:
         """Weight of a bead whose width departs from the recent accepted ones (docstring)."""
         c = self.kalman
+        f = width_weight(width, self._widths, c.width_tol)
         if len(self._widths) < 5 or not math.isfinite(width):
-            return 1.0
-        m = float(np.median(self._widths))
-        u = (width - m) / (c.width_tol * m)
-        if abs(u) <= 1.0:
+            return f
+        if f == 1.0:
             self._odd_widths = 0
-            return 1.0
+            return f
         self._odd_widths += 1
         if self._odd_widths >= c.width_memory // 2:  # the weld changed (a turn): relearn
             self._widths.clear()
             self._odd_widths = 0
-        return 1.0 / (u * u)
+        return f
 
     # ------------------------------------------------------------------------------- step
     def _motion(self, dt, odometry) -> tuple[float, float]:
@@ -518,6 +523,11 @@ class Tracker:
         accepted = False
         raw["v_heading_deg"] = raw["v_heading_sd_deg"] = NAN
         if raw["h_found"] > 0.5:
+            w = width_weight(raw["h_width_mm"], self._widths, self.kalman.width_tol)
+            if not kf.innovation_ok(raw["h_x_mm"], raw["h_y_mm"], raw["h_confidence"] * w):
+                from .bead_near import refit_near  # a gated bead: the one near the line?
+
+                refit_near(raw, np.asarray(points_h), self, self.config.weld)
             conf = raw["h_confidence"] * self._width_factor(raw["h_width_mm"])
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
             if accepted:
@@ -575,7 +585,11 @@ class Tracker:
             x = None
         ys = points_v[:, 1][np.isfinite(points_v[:, 1])] if points_v.ndim == 2 else points_v[:0]
         y = float(np.median(ys)) if ys.size else None
-        xj = self._junctions.update(obs.frame, x, extent, y)
+        line = None
+        if c.junction_bar_slope and xs.size >= 10 and np.ptp(xs) > 0:
+            m, y0 = np.polyfit(xs, ys, 1)  # the stripe on the wall: y_r = y0 + m x_r
+            line = (float(y0), float(m))
+        xj = self._junctions.update(obs.frame, x, extent, y, line)
         if math.isfinite(xj):
             obs.junction = True
             obs.junction_x_mm = xj

@@ -1,0 +1,109 @@
+"""A T whose bar meets the stem at an angle other than 90° (issue 12 generality audit,
+experiments/tracking_generality.py): the held junction follows the bar along the stripe
+while the robot turns (`JunctionTrack(bar_slope=True)`), and the horizontal stripe's bead
+is the one near the predicted line, not the larger bar beside it (`cslx.runtime.bead_near`)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from cslx.runtime.bead_near import bead_near
+from cslx.runtime.junction_track import JunctionTrack
+from cslx.runtime.line_filter import KalmanConfig
+from cslx.runtime.weld import WeldConfig
+
+
+def _track(bar_slope: bool) -> JunctionTrack:
+    c = KalmanConfig()
+    return JunctionTrack(
+        c.junction_window,
+        c.junction_tol_mm,
+        c.junction_hold,
+        c.junction_unseen_mm,
+        hold_min_support=c.junction_hold_min_support,
+        x_min_mm=150.0,
+        crossing_zone=(110.0, 162.0),
+        keep_clear=c.junction_keep_clear,
+        confirm_min=c.junction_confirm_min,
+        bar_slope=bar_slope,
+    )
+
+
+def _approach(bar_deg: float, bar_slope: bool, noise: float = 0.5) -> np.ndarray:
+    """|reported − true| x_r (mm) per frame of a robot turning 0.25° a frame while it
+    advances 1.5 mm towards a bar at `bar_deg` to its path; the vertical stripe at
+    y_r = −39 mm sees the bar's centre line with `noise` mm of scatter."""
+    rng = np.random.default_rng(3)
+    track = _track(bar_slope)
+    y_s = -39.0
+    u = np.array([math.cos(math.radians(bar_deg)), math.sin(math.radians(bar_deg))])
+    pos, th, errors = np.array([-200.0, 0.0]), 0.0, []
+    for i in range(40):
+        if i:
+            d, delta = 1.5, math.radians(0.25)
+            pos = pos + d * np.array([math.cos(th), math.sin(th)])
+            th += delta
+            track.move(d, delta)
+        # the bar (through the world origin) in the robot frame, where it meets y_r = y_s
+        c, s = math.cos(th), math.sin(th)
+        p = np.array([[c, s], [-s, c]]) @ (-pos)
+        v = np.array([[c, s], [-s, c]]) @ u
+        x_true = p[0] + v[0] * (y_s - p[1]) / v[1]
+        x = x_true + noise * rng.standard_normal()
+        xj = track.update(i, x, (96.5, 219.5), y_s, (y_s, 0.0))
+        if math.isfinite(xj):
+            errors.append(abs(xj - x_true))
+    return np.array(errors)
+
+
+def test_oblique_bar_followed_while_turning():
+    # 60°: without the bar's slope the held median falls behind the sightings (8.6 mm after
+    # 7° of turn, then out of tolerance of them: the report lapses); with it 0.35 mm on
+    # average, 2.0 mm at most (the median's lag before 10 sightings show a significant
+    # slope; bound 2.5 mm, under the issue's 3 mm)
+    plain, sloped = _approach(60.0, False), _approach(60.0, True)
+    assert plain.max() > 5.0
+    assert len(sloped) >= 36
+    assert sloped.max() < 2.5
+    assert sloped.mean() < 0.5
+
+
+def test_square_bar_with_slope():
+    # 90°: in the robot frame the bar turns with the robot (10° over the run); the median
+    # lags ≈ 2 mm by the end (0.8 mm mean), the line through the plate points stays within
+    # the scatter (0.5 mm)
+    plain, sloped = _approach(90.0, False), _approach(90.0, True)
+    assert len(sloped) == len(plain) >= 36
+    assert sloped.max() < 1.5
+    assert sloped.mean() < plain.mean()
+
+
+def _profile(beads) -> tuple[np.ndarray, np.ndarray]:
+    """(640, 3) horizontal-stripe points on a plate at x_r 150 mm with circular-cap beads
+    (centre y_r, width, height) mm, 0.03 mm noise."""
+    y = np.linspace(-80.0, 80.0, 640)
+    z = np.zeros_like(y)
+    for yc, w, h in beads:
+        rho = (w * w / 4 + h * h) / (2 * h)
+        d2 = (y - yc) ** 2
+        z = np.maximum(
+            z, np.where(d2 < w * w / 4, np.sqrt(np.maximum(rho**2 - d2, 0)) - (rho - h), 0)
+        )
+    z = z + 0.03 * np.random.default_rng(0).standard_normal(y.shape)
+    return np.stack([np.full_like(y, 150.0), y, z], 1), np.ones(640, bool)
+
+
+@pytest.mark.parametrize("offset", [-6.0, 3.0])
+def test_bead_near_prediction_not_the_larger_bar(offset):
+    # the stem (15 mm wide) at `offset`, an oblique bar's 30 mm run 25 mm to its left
+    P, valid = _profile([(offset, 15.0, 2.0), (offset + 25.0 + 7.5, 30.0, 2.2)])
+    cfg = WeldConfig()
+    # no point left out: the largest run, as the pipeline's `stripe_feature` takes it
+    largest = bead_near(P, offset + 0.8, 0.0, 150.0, 1e3, cfg)
+    assert abs(float(largest.position) - (offset + 32.5)) < 1.0
+    near = bead_near(P, offset + 0.8, 0.0, 150.0, 7.5 + 8.0, cfg)
+    assert bool(near.found)
+    assert abs(float(near.position) - offset) < 0.2
+    assert abs(float(near.width) - 15.0) < 1.0
+    assert abs(float(near.height) - 2.0) < 0.2
