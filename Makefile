@@ -6,6 +6,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 # Single-threaded OpenBLAS (cslx.environment): its threaded Cholesky stalls MED on 2 cores.
 export OPENBLAS_NUM_THREADS := 1
+# The notebooks' kernels compile like the tests (tests/conftest.py, TEST_XLA_FLAGS): LLVM -O0.
+TEST_XLA_FLAGS := $(strip $(XLA_FLAGS) --xla_backend_optimization_level=0)
 
 .PHONY: demo test clean
 
@@ -22,7 +24,7 @@ test: $(BIN)/cslx
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest -n auto -q --durations=15 tests
-	if ls notebooks/*.ipynb >/dev/null 2>&1; then $(BIN)/python -m pytest -n auto -q --nbmake notebooks; fi
+	if ls notebooks/*.ipynb >/dev/null 2>&1; then XLA_FLAGS="$(TEST_XLA_FLAGS)" $(BIN)/python -m pytest -n auto -q --nbmake notebooks; fi
 
 clean:
 	rm -rf $(VENV) .pytest_cache
