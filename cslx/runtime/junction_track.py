@@ -150,7 +150,8 @@ class JunctionTrack:
 
     def _on_bar(self, frames: list[int]) -> float:
         """Where the line through these sightings' plate points (the crossing weld's centre
-        line, `bar_slope`) meets the stripe now; NaN with fewer than 5 points."""
+        line, `bar_slope`) meets the stripe now; NaN with fewer than 10 points, under 3 mm of
+        spread along the stripe, or no slope beyond twice its standard deviation."""
         pts = np.array([self.points[f] for f in frames if f in self.points])
         if len(pts) < 10 or np.ptp(pts[:, 1]) < 3.0:  # no spread along the stripe: no slope
             return math.nan

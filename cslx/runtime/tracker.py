@@ -586,9 +586,12 @@ class Tracker:
         ys = points_v[:, 1][np.isfinite(points_v[:, 1])] if points_v.ndim == 2 else points_v[:0]
         y = float(np.median(ys)) if ys.size else None
         line = None
-        if c.junction_bar_slope and xs.size >= 10 and np.ptp(xs) > 0:
-            m, y0 = np.polyfit(xs, ys, 1)  # the stripe on the wall: y_r = y0 + m x_r
-            line = (float(y0), float(m))
+        if c.junction_bar_slope and points_v.ndim == 2:
+            both = np.all(np.isfinite(points_v[:, :2]), axis=1)
+            xy = points_v[both, :2]
+            if len(xy) >= 10 and np.ptp(xy[:, 0]) > 0:
+                m, y0 = np.polyfit(xy[:, 0], xy[:, 1], 1)  # the stripe: y_r = y0 + m x_r
+                line = (float(y0), float(m))
         xj = self._junctions.update(obs.frame, x, extent, y, line)
         if math.isfinite(xj):
             obs.junction = True
