@@ -42,7 +42,12 @@ frame gone, ≈ 85 µs p10 of them), and Steger's thresholds on the column maxim
 over the ridge values instead of four, `cslx.segmentation.steger._select`): the ``jit(_med)``
 group's p10 sum 690, 760, 793 → 565, 595, 652 µs (the three runs of each, not paired),
 Steger's 866, 902, 948 → 726, 851, 885 µs, all kernels 3255, 3613, 3880 → 3041, 3157,
-3429 µs. `experiments.ab_tracking --rev main` at load 8–11 (600 interleaved frames): median
+3429 µs. The Steger part was taken back (`c59fba6` reverted): its accepted point is the
+pixel whose recomputed strength equals the column maximum exactly, and XLA computes the two
+in different fusions; compiled at LLVM -O0 (the test session's level) the two differed in a
+column, and Steger's gradient test (against finite differences) and the sharded-equals-vmap
+test failed. The MED part is kept (its profile sums above). With both parts,
+`experiments.ab_tracking --rev main` at load 8–11 (600 interleaved frames): median
 11.02 → 9.42 ms, p10 7.43 → 7.17, process CPU 8.10 → 7.71 ms, paired median −0.03 ms (the
 load's quartiles ±3 ms: no wall-time figure on a quiet machine yet). Centres within 3e-5 px
 (one float32 ulp at 256–512 px) of the FFT path's, band − full-frame agreement unchanged

@@ -223,44 +223,31 @@ def _ridge(image: Array, sigma: float, max_offset) -> _Ridge:
 
 
 def _select(
-    ridge: _Ridge, axis: int, threshold, min_strength, snr, min_cos: float, strongest=None
+    ridge: _Ridge, axis: int, threshold, min_strength, snr, min_cos: float, strongest
 ) -> Centres:
-    """Strongest accepted ridge point per column (axis 0) or row (axis 1), at the crossing.
-
-    The thresholds on the strength are monotone, so a column's strongest candidate (a
-    geometric, steep enough ridge point of positive strength ≥ ``min_strength``) is its
-    accepted point when it passes them and none is otherwise: the thresholds apply to the
-    per-column maxima, and ``strongest`` (None: the largest of them, the frame's strongest
-    ridge point of this axis) comes from them too. The per-pixel ridge values then feed two
-    reductions (the column maxima with the frame's mean |λ|, and the chosen points' sums)
-    rather than four (the frame's maximum, the mean, the maxima of the thresholded scores,
-    the sums), each of which XLA's CPU backend fused with its own copy of the eigen-
-    decomposition and filters: the same centres bit for bit (issue 13, against the four
-    passes on tracking bands of the sunny video: 64×640 and 480×128 alone within ±0.04 ms,
-    the tracking program's Steger kernels' p10 sum 866–948 → 726–885 µs over three
-    profiles each, load 5–13; experiments/profile_tracking.py).
-    """
+    """Strongest accepted ridge point per column (axis 0) or row (axis 1), at the crossing."""
     n_along = ridge.nv if axis == 0 else ridge.nu
     steep_ok = jnp.abs(n_along) >= min_cos
-    candidate = ridge.geometric & steep_ok & (ridge.strength >= min_strength) & (ridge.strength > 0)
-    best = jnp.max(jnp.where(candidate, ridge.strength, 0.0), axis=axis)
-    if strongest is None:
-        strongest = lax.stop_gradient(jnp.max(best))
-    keep = (best >= threshold * strongest) & (best >= snr * ridge.scale) & (best > 0)
-    best = jnp.where(keep, best, 0.0)
-    # a column without an accepted point has best 0, which no candidate (strength > 0) equals
-    chosen = candidate & (ridge.strength == jnp.expand_dims(best, axis))
+    accept = (
+        ridge.geometric
+        & steep_ok
+        & (ridge.strength >= threshold * strongest)
+        & (ridge.strength >= min_strength)
+        & (ridge.strength >= snr * ridge.scale)
+        & (ridge.strength > 0)
+    )
     safe_n = jnp.where(steep_ok, n_along, 1.0)
     offset = ridge.t / safe_n  # to the crossing of the local line with the column/row
     size = ridge.t.shape[axis]
     index = jnp.arange(size, dtype=ridge.t.dtype)
     index = index[:, None] if axis == 0 else index[None, :]
-    # the count as a float sum (exact: at most a column's length of ones): XLA's CPU
-    # backend ran the integer count as a materialised int32 image and two reductions
-    count = jnp.sum(chosen.astype(ridge.t.dtype), axis=axis)
+    score = jnp.where(accept, ridge.strength, 0.0)
+    best = jnp.max(score, axis=axis)
+    chosen = accept & (score == jnp.expand_dims(best, axis))
+    count = jnp.sum(chosen, axis=axis)
     total = jnp.sum(jnp.where(chosen, index + offset, 0.0), axis=axis)
     valid = count > 0
-    pos = jnp.where(valid, total / jnp.maximum(count, 1.0), jnp.nan)
+    pos = jnp.where(valid, total / jnp.maximum(count, 1).astype(total.dtype), jnp.nan)
     return Centres(pos, valid, jnp.where(valid, best, 0.0))
 
 
@@ -284,7 +271,8 @@ def _check_image(image) -> Array:
 def _steger_centres(image, threshold, min_strength, snr, max_offset, *, sigma, axis, max_angle_deg):
     ridge = _ridge(image, sigma, max_offset)
     min_cos = math.cos(math.radians(max_angle_deg))
-    return _select(ridge, axis, threshold, min_strength, snr, min_cos)
+    strongest = _strongest(ridge, min_cos, (axis,))
+    return _select(ridge, axis, threshold, min_strength, snr, min_cos, strongest)
 
 
 def steger_centres(
