@@ -126,10 +126,8 @@ def stripe_y_mm(sensor, x_mm: float) -> float:
 
 def sequence(seed: int, cond: dict, n_frames: int, nuisance: str) -> dict:
     """Render one approach under condition `cond` (see `CONDITIONS`)."""
-    from cslx.sim.render import LASER_RGB, NUISANCES, make_world, render_image
-    from cslx.sim.scene import RobotPose
-    from cslx.sim.truth import true_weld_line
-    from experiments.tracking_sequences import view_x_mm
+    from cslx.sim.render import LASER_RGB, NUISANCES, make_world
+    from experiments.tracking_sequences import render_poses, view_x_mm
 
     sensor = rig_sensor(**cond.get("rig", {}))
     rng = np.random.default_rng([seed, 12])
@@ -170,29 +168,8 @@ def sequence(seed: int, cond: dict, n_frames: int, nuisance: str) -> dict:
     nz = NUISANCES[nuisance]
     if cond.get("laser"):
         nz = nz._replace(laser_rgb=LASER_RGB[cond["laser"]])
-    frames, truth = [], []
-    for i, p in enumerate(poses):
-        pose = RobotPose(*p)
-        frames.append(
-            render_image(sensor, world, pose, nz, seed=seed * 100003 + i, scene_seed=seed)
-        )
-        truth.append(true_weld_line(world, pose, sensor, 0, 1))
-    d = np.zeros(n_frames)
-    delta = np.zeros(n_frames)
-    for i in range(1, n_frames):
-        dx, dy = poses[i, :2] - poses[i - 1, :2]
-        th = poses[i - 1, 2]
-        d[i] = dx * math.cos(th) + dy * math.sin(th)
-        delta[i] = poses[i, 2] - poses[i - 1, 2]
-    return dict(
-        sensor=sensor,
-        frames=np.stack(frames),
-        poses=poses,
-        odo_d=d,
-        odo_delta=delta,
-        sizes=np.asarray((w0, h0, w1, h1)),
-        **{k: np.array([t[k] for t in truth]) for k in truth[0]},
-    )
+    seq = render_poses(sensor, world, poses, nz, seed)
+    return dict(sensor=sensor, sizes=np.asarray((w0, h0, w1, h1)), **seq)
 
 
 def score(obs: list, seq: dict, sensor, junction_tol_mm: float = 3.0) -> dict:

@@ -94,6 +94,36 @@ def sequence_poses(seed: int, placement: str, n_frames: int, step_mm: float = 1.
     return world, poses, (w0, h0, w1, h1)
 
 
+def render_poses(sensor, world, poses: np.ndarray, nuisance, seed: int) -> dict[str, np.ndarray]:
+    """Frames at `poses` (n, 3: x, y, θ), each frame's truth (`true_weld_line`) and the
+    odometry between them: forward distance along the previous heading and heading change."""
+    from cslx.sim.render import render_image
+    from cslx.sim.scene import RobotPose
+    from cslx.sim.truth import true_weld_line
+
+    frames, truth = [], []
+    for i, p in enumerate(poses):
+        pose = RobotPose(*p)
+        frames.append(
+            render_image(sensor, world, pose, nuisance, seed=seed * 100003 + i, scene_seed=seed)
+        )
+        truth.append(true_weld_line(world, pose, sensor, 0, 1))
+    n = len(poses)
+    d, delta = np.zeros(n), np.zeros(n)
+    for i in range(1, n):
+        dx, dy = poses[i, :2] - poses[i - 1, :2]
+        th = poses[i - 1, 2]
+        d[i] = dx * math.cos(th) + dy * math.sin(th)
+        delta[i] = poses[i, 2] - poses[i - 1, 2]
+    return dict(
+        frames=np.stack(frames),
+        poses=poses,
+        odo_d=d,
+        odo_delta=delta,
+        **{k: np.array([t[k] for t in truth]) for k in truth[0]},
+    )
+
+
 def make_sequence(
     seed: int,
     nuisance: str,
@@ -112,35 +142,11 @@ def make_sequence(
         if path.exists():
             return dict(np.load(path))
     from cslx.sensor import default_sensor
-    from cslx.sim.render import render_image
-    from cslx.sim.scene import RobotPose
-    from cslx.sim.truth import true_weld_line
 
     sensor = default_sensor()
     world, poses, sizes = sequence_poses(seed, placement, n_frames, start_mm=start_mm)
-    frames, truth = [], []
-    for i, p in enumerate(poses):
-        pose = RobotPose(*p)
-        frames.append(
-            render_image(sensor, world, pose, nuisance, seed=seed * 100003 + i, scene_seed=seed)
-        )
-        truth.append(true_weld_line(world, pose, sensor, 0, 1))
-    # odometry: forward distance along the robot's heading and the heading change
-    d = np.zeros(n_frames)
-    delta = np.zeros(n_frames)
-    for i in range(1, n_frames):
-        dx, dy = poses[i, :2] - poses[i - 1, :2]
-        th = poses[i - 1, 2]
-        d[i] = dx * math.cos(th) + dy * math.sin(th)
-        delta[i] = poses[i, 2] - poses[i - 1, 2]
-    seq = dict(
-        frames=np.stack(frames),
-        poses=poses,
-        odo_d=d,
-        odo_delta=delta,
-        sizes=np.asarray(sizes),
-        **{k: np.array([t[k] for t in truth]) for k in truth[0]},
-    )
+    seq = render_poses(sensor, world, poses, nuisance, seed)
+    seq["sizes"] = np.asarray(sizes)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp.npz")
