@@ -68,3 +68,21 @@ def test_one_thread_backend_gives_the_cores_back():
     assert applied == (len(before) > 1)
     for tid in os.listdir("/proc/self/task"):
         assert os.sched_getaffinity(int(tid)) == before
+
+
+def test_test_session_compiles_at_level_0_and_passes_it_on():
+    """tests/conftest.py: the session compiles at XLA's backend optimisation level 0
+    (`TEST_XLA_FLAGS`, unless CSLX_TEST_XLA_OPT=default) and a command it starts inherits
+    the flag beside the library's own (`configure`'s small-loop option)."""
+    from tests.conftest import TEST_XLA_FLAGS
+
+    wanted = os.environ.get("CSLX_TEST_XLA_OPT", "").strip().lower() != "default"
+    assert (TEST_XLA_FLAGS in os.environ.get("XLA_FLAGS", "").split()) == wanted
+    code = (
+        "from cslx.environment import configure; configure(); "
+        "import os; print(os.environ['XLA_FLAGS'])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    flags = out.stdout.split()
+    assert (TEST_XLA_FLAGS in flags) == wanted
+    assert any(f.startswith("--xla_backend_extra_options=") for f in flags)
