@@ -46,9 +46,10 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
+from ..reductions import first_argmax
 from ..segmentation.clipped import background_step, centre_runs
 from ..segmentation.med import initial_filter, med, med_apply, med_output
-from ..segmentation.med_bands import band_snr_scale, first_peak
+from ..segmentation.med_bands import band_snr_scale
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
@@ -269,7 +270,8 @@ def _cold(I, state: PipelineState, config: PipelineConfig):
     if not config.first_pass:
         return _full(I, state, config)
     I0 = I[0] if isinstance(I, tuple) else I
-    banded, fits = _first_pass(first_peak(I0, 0), first_peak(I0, 1), I0.shape, state, config)
+    peaks = first_argmax(I0, 0)[0], first_argmax(I0, 1)[0]
+    banded, fits = _first_pass(*peaks, I0.shape, state, config)
     return lax.cond(
         fits,
         lambda: _bands(image_cutter(I), I0.shape, banded, config, config.max_steps),
@@ -289,7 +291,8 @@ def _cold_rgb(rgb, state: PipelineState, config: PipelineConfig, dtype):
     zero = jnp.zeros((), jnp.int32)
     cols = band_image(rgb[:, ::k], zero, shape[0], 0, w, dtype, fill, dome)
     rows = band_image(rgb[::k], zero, shape[1], 1, w, dtype, fill, dome)
-    banded, fits = _first_pass(first_peak(cols, 0), first_peak(rows, 1), shape, state, config)
+    peaks = first_argmax(cols, 0)[0], first_argmax(rows, 1)[0]
+    banded, fits = _first_pass(*peaks, shape, state, config)
     cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped, dome)
     return lax.cond(fits, lambda: _bands(cut, shape, banded, config, config.max_steps), full)
 
