@@ -19,13 +19,17 @@ that bead if the gate accepts it (`Tracker` with `KalmanConfig.near_refit_mm` > 
 window's half width is half the recent beads' median width plus `near_refit_mm`, which
 leaves room for the prediction's error and the bead's toes.
 
-Runs on the host's request only on a gated frame; the first call compiles it (once per
-tracker process and profile length).
+Runs on the host's request only on a gated frame, as a program compiled when the tracker
+starts (`near_program`; once per process, profile length and detector settings, reloaded
+from the cache folder like the step itself): compiled on the first gated frame instead, it
+stalled that frame by its compile (9 s CPU, 20 s wall at load 9 on the 2-core machine), far
+past the controller's 0.5 s without a confident observation.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import jax
@@ -45,7 +49,10 @@ from .weld import (
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
     from jaxtyping import Array, Float
 
-__all__ = ["bead_near", "refit_near"]
+__all__ = ["bead_near", "near_for", "near_program", "refit_near"]
+
+#: `near_program`'s compiled programs in this process, by (settings, profile length).
+_PROGRAMS: dict[tuple[str, int], Callable] = {}
 
 
 @jax.jit
@@ -95,7 +102,9 @@ def refit_near(raw: dict, points_h: np.ndarray, tracker, config: WeldConfig) -> 
     if c.near_refit_mm <= 0 or not kf.initialised or not tracker._widths:
         return False
     half = 0.5 * float(np.median(tracker._widths)) + c.near_refit_mm
-    f = bead_near(points_h, kf.x[0], math.tan(kf.x[1]), tracker.x_ref, half, config)
+    line = (kf.x[0], math.tan(kf.x[1]), tracker.x_ref, half)
+    near = tracker._near or near_program(lambda: config, repr(config), points_h.shape[0])
+    f = near(np.asarray(points_h, np.float32), *(np.float32(v) for v in line))
     x, y, conf = float(f.centre[0]), float(f.centre[1]), float(f.confidence)
     width = float(f.width)
     w = width_weight(width, tracker._widths, c.width_tol)
@@ -104,3 +113,36 @@ def refit_near(raw: dict, points_h: np.ndarray, tracker, config: WeldConfig) -> 
     raw.update(h_x_mm=x, h_y_mm=y, h_width_mm=width, h_height_mm=float(f.height))
     raw.update(h_confidence=conf, h_near=1.0)
     return True
+
+
+def near_program(config: Callable[[], WeldConfig], setting: str, n_points: int) -> Callable:
+    """`bead_near` compiled for ``n_points`` float32 points and the settings ``config()``
+    (called only to build), named ``setting`` in the cache key: ``call(points, offset,
+    slope, x_ref, half)`` (float32 arrays) → `WeldFeature`. Kept in this process and, with
+    a cache folder, on disk (`cslx.runtime.compiled.cached_program`)."""
+    key = (setting, int(n_points))
+    if key not in _PROGRAMS:
+        from .compiled import cached_program
+
+        def build():
+            weld = config()
+
+            def flat(points, offset_mm, slope, x_ref, half_mm):
+                return tuple(bead_near(points, offset_mm, slope, x_ref, half_mm, weld))
+
+            scalar = jax.ShapeDtypeStruct((), jnp.float32)
+            return flat, (jax.ShapeDtypeStruct((n_points, 3), jnp.float32),) + (scalar,) * 4, {}
+
+        call, _, _ = cached_program(f"bead_near|{setting}|{n_points}", build)
+        _PROGRAMS[key] = lambda *a: WeldFeature(*call(*a))
+    return _PROGRAMS[key]
+
+
+def near_for(tracker) -> Callable | None:
+    """The tracker's `near_program` (its profile length and weld settings), compiled when it
+    starts; None when its `KalmanConfig.near_refit_mm` turns the refit off."""
+    if tracker.kalman.near_refit_mm <= 0:
+        return None
+    own = tracker._config  # None: the default settings, named (no pipeline import to name them)
+    setting = "tracking_config().weld" if own is None else repr(own.weld)
+    return near_program(lambda: tracker.config.weld, setting, tracker.image_shape[1])

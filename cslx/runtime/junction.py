@@ -48,6 +48,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
+from ..reductions import first_argmax
 from .small_ops import one_function
 from .weld import (
     VERTICAL_AXIS,
@@ -60,18 +61,6 @@ from .weld import (
 )
 
 __all__ = ["crossing_feature"]
-
-
-def _first_argmax(a: Float[Array, "k n"]) -> Array:
-    """``jnp.argmax(a, axis=1)`` (first maximum; first NaN if any) as two plain reductions.
-
-    XLA's CPU backend runs the arg-max reduction slowly: on the 480×480 apex search this
-    took `crossing_feature` from 1.67 to 0.96 ms (issue 13; tracking video, load 2–5, same
-    run), with identical outputs (tests/runtime/test_junction.py).
-    """
-    top = jnp.max(a, axis=-1, keepdims=True)
-    index = jax.lax.broadcasted_iota(jnp.int32, a.shape, a.ndim - 1)
-    return jnp.min(jnp.where((a == top) | jnp.isnan(a), index, a.shape[-1]), axis=-1)
 
 
 #: Toes whose apex test runs on the short path of `crossing_feature` (more take the long one).
@@ -103,7 +92,7 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
 
     def one_toe(i):
         dt = t - t[i]  # point's t minus the toe's t
-        apex = _first_argmax(jnp.where(ok & (dt <= 0.0) & (dt >= -half_max), h, -jnp.inf))
+        apex, _ = first_argmax(jnp.where(ok & (dt <= 0.0) & (dt >= -half_max), h, -jnp.inf))
         t_apex = t[apex]
         half = 0.5 * (t[i] + t[nxt_c[i]]) - t_apex
         # rises to the apex from the near side: the lowest point in the half-width before it

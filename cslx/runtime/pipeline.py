@@ -46,9 +46,10 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float, Int, UInt8
 
+from ..reductions import first_argmax
 from ..segmentation.clipped import background_step, centre_runs
 from ..segmentation.med import initial_filter, med, med_apply, med_output
-from ..segmentation.med_bands import band_snr_scale, first_peak
+from ..segmentation.med_bands import band_snr_scale
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
@@ -237,17 +238,18 @@ def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=N
     )
 
 
-def _first_pass(peaks_h, peaks_v, shape, state: PipelineState, config: PipelineConfig):
+def _first_pass(cols, rows, shape, state: PipelineState, config: PipelineConfig):
     """Bands from a cheap first pass on a frame without tracking state: (state, fits).
 
-    The brightest sample of every column (row) of the monochrome image (``peaks_h`` /
-    ``peaks_v``, possibly of every k-th one) is a rough stripe position; the bands are
+    The brightest sample of every column of ``cols`` (row of ``rows``: the monochrome
+    image, or every k-th column / row of it) is a rough stripe position; the bands are
     centred on their medians. They are used when nearly all of those positions fall inside
     (the `_next_bands` rule: 98 %, away from the band edges); stray maxima (the other
     stripe, a glint) are the few columns left out. Otherwise the frame goes through
     full-frame MED.
     """
     height, width = shape
+    peaks_h, peaks_v = first_argmax(cols, 0)[0], first_argmax(rows, 1)[0]
     hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
 
     def band(peaks, half, size):
@@ -269,7 +271,7 @@ def _cold(I, state: PipelineState, config: PipelineConfig):
     if not config.first_pass:
         return _full(I, state, config)
     I0 = I[0] if isinstance(I, tuple) else I
-    banded, fits = _first_pass(first_peak(I0, 0), first_peak(I0, 1), I0.shape, state, config)
+    banded, fits = _first_pass(I0, I0, I0.shape, state, config)
     return lax.cond(
         fits,
         lambda: _bands(image_cutter(I), I0.shape, banded, config, config.max_steps),
@@ -289,7 +291,7 @@ def _cold_rgb(rgb, state: PipelineState, config: PipelineConfig, dtype):
     zero = jnp.zeros((), jnp.int32)
     cols = band_image(rgb[:, ::k], zero, shape[0], 0, w, dtype, fill, dome)
     rows = band_image(rgb[::k], zero, shape[1], 1, w, dtype, fill, dome)
-    banded, fits = _first_pass(first_peak(cols, 0), first_peak(rows, 1), shape, state, config)
+    banded, fits = _first_pass(cols, rows, shape, state, config)
     cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped, dome)
     return lax.cond(fits, lambda: _bands(cut, shape, banded, config, config.max_steps), full)
 

@@ -114,6 +114,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MOTION
+from .bead_near import near_for, refit_near
 from .junction_track import JunctionTrack, cut_by_view
 from .line_filter import KalmanConfig, WeldLineFilter, width_weight
 from .path_heading import PathHeading
@@ -300,6 +301,7 @@ class Tracker:
         self._programs: dict[tuple, Any] = {}  # the compiled step per (Steger σ, weights)
         self.sigma0, self.weights0 = self._program(None)
         self.compile_s = self._compile_s
+        self._near = near_for(self)  # compiled now, not on the first gated frame (bead_near)
         self.reset()
 
     def _program(self, sigma: float | None, weights=None) -> tuple:
@@ -525,8 +527,6 @@ class Tracker:
         if raw["h_found"] > 0.5:
             w = width_weight(raw["h_width_mm"], self._widths, self.kalman.width_tol)
             if not kf.innovation_ok(raw["h_x_mm"], raw["h_y_mm"], raw["h_confidence"] * w):
-                from .bead_near import refit_near  # a gated bead: the one near the line?
-
                 refit_near(raw, np.asarray(points_h), self, self.config.weld)
             conf = raw["h_confidence"] * self._width_factor(raw["h_width_mm"])
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)

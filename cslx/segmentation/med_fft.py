@@ -23,6 +23,8 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, Complex, Float
 
+from ..reductions import first_argmax
+
 
 def fft_length(n: int) -> int:
     """Smallest 5-smooth integer (2^a 3^b 5^c) ≥ n: fast FFT sizes (720 for 719)."""
@@ -542,24 +544,11 @@ def ridge_positions(Y: Float[Array, "s k"], sigma: float):
             t2 = t2 + float(g2[j]) * (before + after)
         return -t1 / jnp.where(t2 < 0, t2, -1.0), t2
 
-    k = first_argmax(Y)
+    k, _ = first_argmax(Y)
     t, _ = at(k)
     k = jnp.clip(k + jnp.clip(jnp.round(t), -h, h).astype(k.dtype), 0, n - 1)
     t, t2 = at(k)
     return k.astype(Y.dtype) + t, (t2 < 0) & (jnp.abs(t) <= 0.6)
-
-
-def first_argmax(Y: Float[Array, "s k"]):
-    """`jnp.argmax` along the last axis (the first maximum) as two plain reductions.
-
-    XLA's CPU backend runs argmax as a variadic (value, index) reduction that it does not
-    vectorise; the maximum, then the smallest index that attains it, are two simple ones.
-    Rows holding NaN: the last index (argmax: the NaN's; the ridge is not ok either way).
-    """
-    n = Y.shape[-1]
-    top = jnp.max(Y, axis=-1, keepdims=True)
-    i = jnp.min(jnp.where(Y == top, jnp.arange(n), n), axis=-1)
-    return jnp.minimum(i, n - 1)
 
 
 #: Segments (evenly spaced) whose ridge displacement `ridge_delay` takes the median of.

@@ -19,8 +19,9 @@ row (vertical stripe), so cslx reports, for each column, the row where the local
 crosses that column's centre: v* = v + t / n_v (moving along the tangent from Steger's point
 p = (v + t n_v, u + t n_u) back to column u; exact for straight lines, and it keeps the
 column index exact so that ground truth per column applies). Among the accepted points of a
-column the strongest wins; the selection is a max, a mask and masked sums instead of
-`argmax` + gather (docs/metrics.md, performance notes). Ties are averaged.
+column the strongest wins, found by one integer max reduction (`cslx.reductions`) and read
+by masked sums rather than `jnp.argmax` + gather (docs/metrics.md, performance notes); of
+equal ones the first.
 
 σ follows Steger's condition for a bar profile of half-width w: σ ≥ w/√3
 (`sigma_for_width`). The separable Gaussian derivative filters are written as sums of
@@ -57,6 +58,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float
+
+from ..reductions import first_argmax
 
 __all__ = [
     "Centres",
@@ -223,31 +226,32 @@ def _ridge(image: Array, sigma: float, max_offset) -> _Ridge:
 
 
 def _select(
-    ridge: _Ridge, axis: int, threshold, min_strength, snr, min_cos: float, strongest
+    ridge: _Ridge, axis: int, threshold, min_strength, snr, min_cos: float, strongest=None
 ) -> Centres:
-    """Strongest accepted ridge point per column (axis 0) or row (axis 1), at the crossing."""
+    """Strongest accepted ridge point per column (axis 0) or row (axis 1), at the crossing.
+
+    A column's candidates are its geometric, steep enough ridge points of positive strength
+    ≥ ``min_strength``; the strongest is found by `cslx.reductions.first_argmax` (one
+    integer max reduction, no equality with a recomputed maximum: module docstring there).
+    The other thresholds are monotone in the strength, so they apply to that strongest
+    candidate: the column's accepted point is it, or none. ``strongest`` (None: the largest
+    of the columns' maxima, the frame's strongest ridge point of this axis) sets the
+    relative threshold.
+    """
     n_along = ridge.nv if axis == 0 else ridge.nu
     steep_ok = jnp.abs(n_along) >= min_cos
-    accept = (
-        ridge.geometric
-        & steep_ok
-        & (ridge.strength >= threshold * strongest)
-        & (ridge.strength >= min_strength)
-        & (ridge.strength >= snr * ridge.scale)
-        & (ridge.strength > 0)
-    )
+    candidate = ridge.geometric & steep_ok & (ridge.strength >= min_strength) & (ridge.strength > 0)
+    top, found = first_argmax(ridge.strength, axis, candidate)
+    index = lax.broadcasted_iota(jnp.int32, ridge.t.shape, axis)
+    chosen = index == jnp.expand_dims(top, axis)
     safe_n = jnp.where(steep_ok, n_along, 1.0)
     offset = ridge.t / safe_n  # to the crossing of the local line with the column/row
-    size = ridge.t.shape[axis]
-    index = jnp.arange(size, dtype=ridge.t.dtype)
-    index = index[:, None] if axis == 0 else index[None, :]
-    score = jnp.where(accept, ridge.strength, 0.0)
-    best = jnp.max(score, axis=axis)
-    chosen = accept & (score == jnp.expand_dims(best, axis))
-    count = jnp.sum(chosen, axis=axis)
-    total = jnp.sum(jnp.where(chosen, index + offset, 0.0), axis=axis)
-    valid = count > 0
-    pos = jnp.where(valid, total / jnp.maximum(count, 1).astype(total.dtype), jnp.nan)
+    best = jnp.sum(jnp.where(chosen, ridge.strength, 0.0), axis=axis)
+    at = jnp.sum(jnp.where(chosen, offset, 0.0), axis=axis)
+    if strongest is None:
+        strongest = lax.stop_gradient(jnp.max(jnp.where(found, best, 0.0)))
+    valid = found & (best >= threshold * strongest) & (best >= snr * ridge.scale)
+    pos = jnp.where(valid, top.astype(at.dtype) + at, jnp.nan)
     return Centres(pos, valid, jnp.where(valid, best, 0.0))
 
 
@@ -271,8 +275,7 @@ def _check_image(image) -> Array:
 def _steger_centres(image, threshold, min_strength, snr, max_offset, *, sigma, axis, max_angle_deg):
     ridge = _ridge(image, sigma, max_offset)
     min_cos = math.cos(math.radians(max_angle_deg))
-    strongest = _strongest(ridge, min_cos, (axis,))
-    return _select(ridge, axis, threshold, min_strength, snr, min_cos, strongest)
+    return _select(ridge, axis, threshold, min_strength, snr, min_cos)
 
 
 def steger_centres(

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cslx.runtime import junction
-from cslx.runtime.junction import _first_argmax, crossing_feature
+from cslx.runtime.junction import crossing_feature
 from cslx.runtime.weld import WeldConfig, stripe_feature
 
 PLATE = dict(z0=0.7, gx=0.03, gy=-0.045)  # a tilted, offset plate (as in test_weld.py)
@@ -112,19 +112,6 @@ def test_crossing_vmap_and_gradients_finite():
     assert float(batch.position[1]) == pytest.approx(float(one.position), abs=1e-6)
     g = jax.jit(jax.grad(lambda p: crossing_feature(p, V[0], WeldConfig()).position))(P[0])
     assert np.all(np.isfinite(np.asarray(g)))
-
-
-def test_first_argmax_equals_argmax():
-    """The apex search's two-reduction arg-max is `jnp.argmax`: ties, -inf rows, NaNs."""
-    rng = np.random.default_rng(3)
-    a = np.round(rng.normal(size=(64, 50)), 1).astype(np.float32)  # many ties
-    a[rng.random(a.shape) < 0.3] = -np.inf
-    a[4] = -np.inf
-    a[7, [5, 20]] = np.nan
-    a[8, 0] = np.nan
-    got = np.asarray(_first_argmax(jnp.asarray(a)))
-    np.testing.assert_array_equal(got, np.asarray(jnp.argmax(jnp.asarray(a), axis=1)))
-    assert got[4] == 0 and got[7] == 5 and got[8] == 0
 
 
 def _toes(points, valid, config):

@@ -107,3 +107,19 @@ def test_bead_near_prediction_not_the_larger_bar(offset):
     assert abs(float(near.position) - offset) < 0.2
     assert abs(float(near.width) - 15.0) < 1.0
     assert abs(float(near.height) - 2.0) < 0.2
+
+
+def test_tracker_compiles_bead_near_at_start_up():
+    """The program the tracker builds when it starts (`near_program`, the tracker's key) finds
+    the stem, not the larger bar, from float32 points: no compile waits for a gated frame."""
+    from cslx.runtime.bead_near import _PROGRAMS, near_program
+    from cslx.runtime.pipeline_config import tracking_config
+
+    P, _ = _profile([(3.0, 15.0, 2.0), (3.0 + 32.5, 30.0, 2.2)])
+    near = near_program(lambda: tracking_config().weld, "tracking_config().weld", 640)
+    assert _PROGRAMS[("tracking_config().weld", 640)] is near
+    line = (3.8, 0.0, 150.0, 7.5 + 8.0)
+    f = near(P.astype(np.float32), *(np.float32(v) for v in line))
+    assert bool(f.found)
+    assert abs(float(f.position) - 3.0) < 0.2
+    assert abs(float(f.width) - 15.0) < 1.0

@@ -120,11 +120,3 @@ def test_ridge_positions_equal_the_dense_filtering():
     np.testing.assert_array_equal(np.asarray(ok), ok_ref)
     np.testing.assert_allclose(np.asarray(got)[ok_ref], ref[ok_ref], rtol=0, atol=1e-9)
     assert ok_ref.sum() > 30
-
-
-def test_first_argmax_is_argmax():
-    rng = np.random.default_rng(2)
-    Y = rng.integers(0, 5, (50, 33)).astype(float)  # many ties
-    np.testing.assert_array_equal(
-        np.asarray(med_fft.first_argmax(jnp.asarray(Y))), np.argmax(Y, axis=-1)
-    )
