@@ -10,7 +10,7 @@ import numpy as np
 from cslx.segmentation import extract
 from cslx.segmentation.colour import CANDIDATES, search_space
 from cslx.segmentation.ridges import _drop_detours, _local_residual, linked_centres
-from cslx.segmentation.robust import _grid_scores
+from cslx.segmentation.search import _grid_scores
 
 H, W = 120, 200
 
