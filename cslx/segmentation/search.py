@@ -35,7 +35,18 @@ from .ridges import _median
 __all__ = ["SEARCH_CLIP_LEVEL", "search_mask", "search_space_unclipped"]
 
 #: For the colour search only, a pixel with a channel at or above this 8-bit level counts as
-#: clipped as well (module docstring). None: `CLIP_LEVEL` alone.
+#: clipped as well (module docstring). None: `CLIP_LEVEL` alone. Evidence, `CLIP_LEVEL` alone
+#: → 240. Development frames (seeds 7100–7117, frames 0–1, both stripes: 72 searches): the
+#: same space every time, so the development benchmark is unchanged bit for bit (225, or the
+#: clipped mask dilated by 1 / 2 px, changed 4 / 4 / 19 of them). Generality audit
+#: (`experiments/ood_extraction.py`, seed 7400, 2 frames; detection %, gross %, median / p95
+#: mm), the frames whose space changed: JPEG q85 saturated + sun V 47.29, 1.10, 0.176 / 0.308
+#: → 99.69, 0.00, 0.052 / 0.243 (H 99.69, 0.71, 0.066 / 0.292 → 99.69, 0.94, 0.063 /
+#: 0.339); JPEG q95 saturated H 0.059 / 0.186 → 0.044 / 0.140, V 0.086 / 0.263 → 0.032 /
+#: 0.190 (100 %, no gross either way; it had picked G − B-like spaces); JPEG q70 sunny H
+#: (frame 0) 0.063 / 0.290 → 0.067 / 0.262; the corner-aimed rig, clean, H (frame 1) 0.0258
+#: / 0.087 → 0.0272 / 0.088. The green / blue lasers, JPEG q70 saturated, the thin stripe on
+#: 4 / 10 mm print, 1280×720 and the 20°-turned cross kept their spaces.
 SEARCH_CLIP_LEVEL: float | None = 240.0
 
 
