@@ -86,7 +86,7 @@ def test_absent_keeps_a_stripe_bit_for_bit_and_drops_a_noisy_one():
 
 
 def test_absent_keeps_a_faint_stripe_only_when_its_path_is_precise_and_long():
-    # A thin faint stripe over printed squares (issue 11 audit, fresh seed 7413 frame 0, the
+    # A thin faint stripe over printed squares (issue 11 audit, fresh seed 7414 frame 0, the
     # vertical stripe): every row found, median σ 0.199 px, median z 15.9 < NO_STRIPE_Z.
     n = 480
     pos = 300 + np.random.default_rng(3).normal(0, 0.1, n)
