@@ -409,10 +409,9 @@ def no_stripe_line(path, stripe: str) -> str:
 
     name = {"h": "horizontal", "v": "vertical"}[stripe]
     return (
-        f"no stripe found in {path} ({name}): no line of centres with a median predicted "
-        f"σ ≤ {p.NO_STRIPE_SIGMA:g} px and ridge strength ≥ {p.NO_STRIPE_Z:g} × noise, nor a "
-        f"faint one (σ ≤ {p.FAINT_SIGMA:g} px, strength ≥ {p.FAINT_Z:g} × noise, on ≥ "
-        f"{100 * p.FAINT_FOUND:g} % of the image) (laser off, blocked or out of view?)"
+        f"no stripe found in {path} ({name}): no line of centres with median σ ≤ "
+        f"{p.NO_STRIPE_SIGMA:g} px and strength ≥ {p.NO_STRIPE_Z:g} × noise, or ≤ {p.FAINT_SIGMA:g}"
+        f" px and ≥ {p.FAINT_Z:g} × noise on ≥ {p.FAINT_FOUND:.0%} (laser off? out of view?)"
     )
 
 
