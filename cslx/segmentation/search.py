@@ -37,7 +37,8 @@ __all__ = ["SEARCH_CLIP_LEVEL", "search_mask", "search_space_unclipped"]
 #: For the colour search only, a pixel with a channel at or above this 8-bit level counts as
 #: clipped as well (module docstring). None: `CLIP_LEVEL` alone. Evidence, `CLIP_LEVEL` alone
 #: → 240. Development frames (seeds 7100–7117, frames 0–1, both stripes: 72 searches): the
-#: same space every time, so the development benchmark is unchanged bit for bit (225, or the
+#: same space every time, as on the flat walls (seeds 41–46, saturated with and without sun,
+#: 24 searches), so both are unchanged bit for bit (225, or the
 #: clipped mask dilated by 1 / 2 px, changed 4 / 4 / 19 of them). Generality audit
 #: (`experiments/ood_extraction.py`, seed 7400, 2 frames; detection %, gross %, median / p95
 #: mm), the frames whose space changed: JPEG q85 saturated + sun V 47.29, 1.10, 0.176 / 0.308
