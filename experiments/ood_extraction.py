@@ -45,7 +45,32 @@ frame); JPEG q85 saturated + sun, vertical stripe 47 % detection (on one frame t
 search picks (1, −2, 1), the path is poor, 0.37 px median, and the no-stripe test's fixed
 0.4 px limit on the median σ drops the whole stripe; R − G, R or 2R − G − B give
 0.045–0.048 px on that frame); a thin faint stripe over 10 mm printed squares, vertical
-50 % (one frame missed, not diagnosed); JPEG q70 + sun, horizontal 0.39 % gross. Tried, not
+50 % (one frame missed, not diagnosed); JPEG q70 + sun, horizontal 0.39 % gross.
+
+The two whole-stripe drops, diagnosed and fixed (issue 11, branch drop11q; detection %,
+gross %, median / p95 mm, 2 frames at seed 7400 unless said):
+- JPEG q85 saturated + sun: JPEG leaves the clipped core at R 251–255, so only some of its
+  pixels reach the clip level and the others, near-white with smeared G and B, decided
+  the space. The colour search now also ignores pixels with a channel ≥ 240
+  (`cslx.segmentation.search.SEARCH_CLIP_LEVEL`; the 72 development searches keep their
+  spaces). V 47.29, 1.10, 0.176 / 0.308 → 99.69, 0.00, 0.052 / 0.243; H 99.69, 0.71,
+  0.066 / 0.292 → 99.69, 0.94, 0.063 / 0.339. Held out (seed 7460, i.e. 7479, 4 frames):
+  V 73.02, 0.00, 0.068 / 0.295 → 98.02, 0.69, 0.064 / 0.291 (one frame's stripe, dropped
+  at σ 0.60 px, now found at σ 0.12 px, 13 gross centres where it had 31 ungated); H
+  100, 0.00, 0.074 / 0.308 → 99.96, 0.43, 0.066 / 0.331 (11 gross centres on one frame in
+  its new space). JPEG q95 saturated (its space changed too): H 0.059 / 0.186 → 0.044 /
+  0.140, V 0.086 / 0.263 → 0.032 / 0.190, 100 % and no gross either way. JPEG q70 sunny H
+  (one frame's space changed) 0.063 / 0.290 → 0.067 / 0.262; the bright scene V 0.0285 /
+  0.131 → 0.0274 / 0.133; corner/clean H 0.0258 / 0.087 → 0.0272 / 0.088 (one frame).
+- Thin stripe over 10 mm squares: the path was right (every row, 0.060 px median error,
+  median σ 0.199 px) but its median ridge strength z 15.9 fell below the no-stripe test's
+  18 (the first stage to drop it; colour search, candidates and path were fine). The test
+  now keeps a faint stripe whose path is precise and long (σ ≤ 0.3 px, z ≥ 12, over half
+  the rows; `cslx.segmentation.presence`, where the laser-off evidence is): V 50.00, 0.00,
+  0.080 / 0.441 → 100.00, 0.00, 0.074 / 0.401. Held out (seed 7460, i.e. 7474, 4 frames): V 50.00,
+  1.46, 0.084 / 0.632 → 75.00, 1.25, 0.087 / 0.611 — one frame rescued (z 17.7, σ 0.155),
+  one still dropped (σ 0.342 px, z 13.4: its path is poor, 0.142 px median, and laser-off
+  stripes reach σ 0.45 at z 15), H unchanged (100 %, z 18.7–23.3, close to the limit). Tried, not
 kept: centres near a detected crossing (the image on a profile's two sides differing by
 > 0.4 × the peak, with a sign change inside the region) and centres whose profile the
 border cuts taken from the final path smoothing through their neighbours — 35° sunny gross

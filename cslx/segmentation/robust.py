@@ -5,11 +5,12 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
 1. Colour space. Fixed weights, or "auto": the kurtosis search of section 3.1 (the 74-space
    grid of `cslx.segmentation.colour`, normalized form) with clipped pixels replaced by the
    frame's median colour, so a white core does not decide the space
-   (`search_space_unclipped`). The grid is scored from the channels' moments (`_grid_scores`:
-   Σ(I − μ)² and Σ(I − μ)⁴ are a quadratic and a quartic form in the weights, so 6 + 15
-   moment sums per column replace 74 monochrome images; equal to `colour.search_space` to
-   rounding, tested) on every `SEARCH_STRIDE`-th column (row): on the 72 development searches
-   (seeds 7100–7117, both stripes) the choice equals the full search's every time.
+   (`cslx.segmentation.search.search_space_unclipped`). The grid is scored from the
+   channels' moments (`_grid_scores`: Σ(I − μ)² and Σ(I − μ)⁴ are a quadratic and a quartic
+   form in the weights, so 6 + 15 moment sums per column replace 74 monochrome images; equal
+   to `colour.search_space` to rounding, tested) on every `SEARCH_STRIDE`-th column (row): on
+   the 72 development searches (seeds 7100–7117, both stripes) the choice equals the full
+   search's every time.
 2. Clipped cores. A pixel with any channel at the sensor's maximum holds a lower bound, not
    a value. Along the search axis, every run of clipped pixels at most `max_run` long gets the
    constant 1.5 × max(value of its two unclipped neighbours) in the monochrome image
@@ -126,22 +127,22 @@ averages out): the goal's median is near that floor even without speckle.
    luma, the two averaged (`CHROMA_REFINE`); 4:2:2 widens the clip test (all in `chroma`).
 8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
    strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
-   up to 616 "centres" per stripe); no laser-on development frame changes (bit-identical).
+   up to 616 "centres" per stripe), unless it is a faint stripe with a precise, long path
+   (σ ≤ 0.3 px, strength ≥ 12, over half the columns); no laser-on development frame
+   changes (bit-identical).
 Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """
 
 from __future__ import annotations
 
 import functools
-import itertools
-import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from ..config import CLIP_LEVEL, SEARCH_STRIDE, SIGMA_MAX
+from ..config import CLIP_LEVEL, SIGMA_MAX
 from . import chroma, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
@@ -154,6 +155,7 @@ from .ridges import (
     drop_stray,
     linked_centres,
 )
+from .search import _unclipped_space, search_space_unclipped
 from .steger import Centres
 
 __all__ = [
@@ -189,91 +191,6 @@ SIGMA_ALONG = 6.0
 SIGMA_MAX_HEIGHT = 480
 #: Smooth the linked path with adaptive local quadratics (`cslx.segmentation.path`).
 SMOOTH_PATH = True
-
-
-# Kurtosis of a colour space from the channels' moments. I − μ = w·d (d: the centred RGB of a
-# column) makes Σ(I − μ)² a quadratic and Σ(I − μ)⁴ a quartic form in w, so the 74 spaces of
-# the grid are scored from 6 + 15 moment sums per column instead of 74 monochrome images
-# (2 s → a few ms per frame). The channels are first turned into an orthonormal luminance /
-# chroma basis: a zero-sum space (R − G, 2R − G − B) then has no luminance term at all, and
-# float32 does not lose it to cancellation against the (large) grey sunlight.
-_BASIS = np.array([[1, 1, 1], [1, -1, 0], [1, 1, -2]], float)
-_BASIS /= np.linalg.norm(_BASIS, axis=1, keepdims=True)
-_PAIRS = list(itertools.combinations_with_replacement(range(3), 2))
-_QUADS = list(itertools.combinations_with_replacement(range(3), 4))
-
-
-def _form_coefficients(candidates: np.ndarray, powers) -> np.ndarray:
-    """(K, P) coefficients of the monomials `powers` of w' = B w for every candidate w."""
-    w = np.asarray(candidates, float) @ _BASIS.T
-    out = np.empty((len(w), len(powers)))
-    for j, p in enumerate(powers):
-        counts = np.bincount(p, minlength=3)
-        multinomial = math.factorial(len(p)) / np.prod([math.factorial(c) for c in counts])
-        out[:, j] = multinomial * np.prod(w[:, list(p)], axis=1)
-    return out
-
-
-def _grid_scores(image, candidates: np.ndarray):
-    """Normalized kurtosis score (`colour.kurtosis_objective`, axis 0) of every candidate."""
-    x = image @ jnp.asarray(_BASIS.T, image.dtype)
-    d = x - jnp.mean(x, axis=0)
-    m = d.shape[0]
-    s2 = jnp.stack([jnp.sum(d[..., a] * d[..., b], 0) for a, b in _PAIRS], -1)
-    q = jnp.stack([d[..., a] * d[..., b] for a, b in _PAIRS], -1)
-    s4 = jnp.stack(
-        [
-            jnp.sum(q[..., _PAIRS.index((a, b))] * q[..., _PAIRS.index((c, e))], 0)
-            for a, b, c, e in _QUADS
-        ],
-        -1,
-    )
-    c2 = jnp.asarray(_form_coefficients(candidates, _PAIRS).T, image.dtype)
-    u = s2 @ c2
-    f = s4 @ jnp.asarray(_form_coefficients(candidates, _QUADS).T, image.dtype)
-    # The flat-column guard of `colour.column_kurtosis`, plus one for spaces that are flat
-    # only up to rounding: a space that cancels every varying channel (B alone beside a
-    # constant G and B) gets u from cancelling terms of size Σ|c||s2|, i.e. rounding noise,
-    # and f / u² of that noise scored highest. Such a column counts as flat (neutral).
-    tiny = jnp.finfo(u.dtype).tiny ** 0.25
-    rounding = 64 * jnp.finfo(u.dtype).eps * (jnp.abs(s2) @ jnp.abs(c2))
-    ok = (u > tiny * jnp.maximum(jnp.max(u, axis=0), tiny)) & (u > rounding)
-    u_safe = jnp.where(ok, u, 1.0)
-    k = jnp.where(ok, f / (u_safe * u_safe), 3.0 / m)
-    return jnp.mean(m * k - 3.0, axis=0)
-
-
-def _unclipped_space(image, clipped, axis: int):
-    """Weights (3,) of the clip-aware kurtosis search (section 3.1); traced, jit-safe."""
-    from .colour import CANDIDATES, _skewness_sign
-
-    flat = image.reshape(-1, 3)
-    median = jnp.stack([_median(flat[::7, c]) for c in range(3)])
-    img = jnp.where(clipped[..., None], median, image)
-    # Every SEARCH_STRIDE-th column (row) is scored: the mean kurtosis over 160 of a frame's
-    # 640 columns ranks the spaces as all of them do, at a quarter of the cost.
-    seg = img if axis == 0 else jnp.swapaxes(img, 0, 1)
-    scores = _grid_scores(seg[:, ::SEARCH_STRIDE], CANDIDATES)
-    best = jnp.asarray(CANDIDATES, image.dtype)[jnp.argmax(scores)]
-    return best * _skewness_sign(best, img, axis)
-
-
-def search_space_unclipped(image, axis: int, clip_level: float = CLIP_LEVEL):
-    """Kurtosis colour search (section 3.1) with clipped pixels set to the median colour.
-
-    Same choice as `colour.search_space` (normalized form, the 74-space grid) on the frame
-    with every clipped pixel replaced by the frame's median colour, scored from moments.
-    """
-    img = jnp.asarray(image)
-    if not jnp.issubdtype(img.dtype, jnp.floating):
-        img = img.astype(jnp.result_type(float))
-    weights = _search_jit(img, clip_level, axis=axis)
-    return tuple(float(w) for w in np.asarray(weights))
-
-
-@functools.partial(jax.jit, static_argnames=("axis",))
-def _search_jit(image, clip_level, *, axis):
-    return _unclipped_space(image, clipped_mask(image, clip_level), axis)
 
 
 def stripe_sigma(width_px, height: int | None = None) -> float:

@@ -85,6 +85,36 @@ def test_absent_keeps_a_stripe_bit_for_bit_and_drops_a_noisy_one():
         assert np.isnan(np.asarray(p)).all() and np.isnan(np.asarray(sg)).all()
 
 
+def test_absent_keeps_a_faint_stripe_only_when_its_path_is_precise_and_long():
+    # A thin faint stripe over printed squares (issue 11 audit, fresh seed 7414 frame 0, the
+    # vertical stripe): every row found, median σ 0.199 px, median z 15.9 < NO_STRIPE_Z.
+    n = 480
+    pos = 300 + np.random.default_rng(3).normal(0, 0.1, n)
+    sat = np.zeros(n, bool)
+
+    def kept(sigma, z, found):
+        valid = np.arange(n) < int(found * n)
+        p = np.where(valid, pos, np.nan)
+        out = presence.absent(
+            p, valid, np.where(valid, sigma, np.nan), np.where(valid, z, 0.0), sat
+        )
+        if np.asarray(out[1]).any():
+            assert np.array_equal(np.asarray(out[0]), p, equal_nan=True)
+            return True
+        assert np.isnan(np.asarray(out[0])).all()
+        return False
+
+    assert 0.199 <= presence.FAINT_SIGMA and 15.9 >= presence.FAINT_Z
+    assert kept(0.199, 15.9, 1.0)
+    assert kept(0.199, 15.9, 0.6)
+    assert not kept(0.199, 15.9, 0.4)  # a short piece needs the first tier's strength
+    assert kept(0.199, 20.0, 0.4)
+    # the nearest laser-off stripes of the no-stripe experiment stay out
+    assert not kept(0.447, 15.0, 0.8)  # z in [12, 18) but σ ≥ 0.446
+    assert not kept(0.208, 9.4, 0.91)  # long and precise, but z 9.4
+    assert not kept(0.026, 10.2, 0.05)
+
+
 def test_cli_says_which_stripe_it_did_not_find(frames, tmp_path, capsys):
     import cv2
 

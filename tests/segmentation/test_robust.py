@@ -10,7 +10,7 @@ import numpy as np
 from cslx.segmentation import extract
 from cslx.segmentation.colour import CANDIDATES, search_space
 from cslx.segmentation.ridges import _drop_detours, _local_residual, linked_centres
-from cslx.segmentation.robust import _grid_scores
+from cslx.segmentation.search import _grid_scores
 
 H, W = 120, 200
 
@@ -202,3 +202,20 @@ def test_second_pass_divides_a_reflectance_slope_out(monkeypatch):
         errs[divide] = np.median(np.abs(np.asarray(c.pos) - v_true)[10:-10])
     assert errs[False] > 0.1
     assert errs[True] < 0.5 * errs[False]
+
+
+def test_search_mask_adds_near_clipped_pixels(monkeypatch):
+    # JPEG leaves a saturated core at 251–255: for the colour search (only) a pixel with a
+    # channel at SEARCH_CLIP_LEVEL or above counts as clipped too.
+    from cslx.segmentation import search
+    from cslx.segmentation.clipped import clipped_mask
+
+    img = np.full((4, 5, 3), 120.0, np.float32)
+    img[1, 1] = (255, 200, 190)  # clipped
+    img[1, 2] = (251, 240, 230)  # JPEG-broken core pixel
+    img[2, 3] = (239, 120, 110)  # a bright flank: kept
+    clipped = clipped_mask(img)
+    mask = np.asarray(search.search_mask(img, clipped))
+    assert mask[1, 1] and mask[1, 2] and not mask[2, 3] and mask.sum() == 2
+    monkeypatch.setattr(search, "SEARCH_CLIP_LEVEL", None)
+    assert np.array_equal(np.asarray(search.search_mask(img, clipped)), np.asarray(clipped))
