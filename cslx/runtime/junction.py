@@ -87,11 +87,23 @@ def _first_indices(mask: Bool[Array, " n"], k: int) -> Array:
     return jnp.min(jnp.where(hit, jnp.arange(n)[None, :], n), axis=1)
 
 
-def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
+def _window_mean(t, v, ok, centre, half: float):
+    """Mean of ``v`` over the ``ok`` points with |t − centre| ≤ ``half``, and whether any."""
+    m = ok & (jnp.abs(t - centre) <= half)
+    n = jnp.sum(m.astype(v.dtype))
+    return jnp.sum(jnp.where(m, v, 0.0)) / jnp.maximum(n, 1.0), n > 0
+
+
+#: Half-length (mm) of the stretches whose mean plate-line height the ramp test compares.
+RAMP_HALF_MM = 2.0
+
+
+def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig, hp=None):
     """The highest apex among the candidate toes ``rows`` (indices; ``n`` = no toe).
 
     For each toe: its apex (the highest point within half the largest bead width before
-    it), the toe's position and the tests of `crossing_feature`'s docstring. Returns (index
+    it), the toe's position and the tests of `crossing_feature`'s docstring; with ``hp``
+    (heights above the plate line), the ramp test too. Returns (index
     of the best toe's apex, apex t, toe t, apex height, whether any toe passed);
     the first of equal toes wins, as an arg-max over all points picks it. Where no toe
     passed, nothing is found and the values only feed outputs that `_feature` masks.
@@ -108,11 +120,19 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
         half = 0.5 * (t[i] + t[nxt_c[i]]) - t_apex
         # rises to the apex from the near side: the lowest point in the half-width before it
         near = ok & (t < t_apex) & (t >= t_apex - half)
-        return apex, jnp.min(jnp.where(near, h, jnp.inf)), jnp.any(near)
+        # the ramp test: plate-line height one background length before the apex less at it
+        if hp is None:
+            ramp = jnp.asarray(-jnp.inf, h.dtype)
+        else:
+            z_apex, at_apex = _window_mean(t, hp, ok, t_apex, RAMP_HALF_MM)
+            back = t_apex - config.crossing_background_mm
+            z_back, at_back = _window_mean(t, hp, ok, back, RAMP_HALF_MM)
+            ramp = jnp.where(at_apex & at_back, z_back - z_apex, -jnp.inf)
+        return apex, jnp.min(jnp.where(near, h, jnp.inf)), jnp.any(near), ramp
 
     # one toe at a time: a (toe, point) array's float minima and maxima went to XLA's
     # library reductions, which keep the caller's loop from compiling as one function
-    apex, h_before, has_near = jax.lax.map(one_toe, r)
+    apex, h_before, has_near, ramp = jax.lax.map(one_toe, r)
     h_apex = h[apex]
     t_apex = t[apex]
     t_toe = 0.5 * (t[r] + t[nxt_c[r]])  # between the last bead point and the first plate point
@@ -125,6 +145,7 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig):
         & (2.0 * half >= config.min_width_mm)
         & (2.0 * half <= config.max_width_mm)
         & (rise >= 0.15 * h_apex)
+        & (ramp <= config.crossing_ramp_max * h_apex)
     )
     k = jnp.argmax(jnp.where(good, h_apex, -jnp.inf))
     return apex[k], t_apex[k], t_toe[k], h_apex[k], jnp.any(good)
@@ -277,8 +298,8 @@ def _crossing(P, valid, order, *, config: WeldConfig) -> WeldFeature:
     (c0, c1), sigma = plate_fit(x, z, ok, config)
     norm = jnp.sqrt(1.0 + c1 * c1)
     t = (x + c1 * (z - c0)) / norm
-    h = (z - c0 - c1 * x) / norm
-    h, level = _above_far_side(t, h, ok, config.crossing_background_mm)
+    hp = (z - c0 - c1 * x) / norm  # height above the plate line
+    h, level = _above_far_side(t, hp, ok, config.crossing_background_mm)
 
     above = ok & (h > config.threshold_mm)
     below = ok & ~above
@@ -292,7 +313,7 @@ def _crossing(P, valid, order, *, config: WeldConfig) -> WeldFeature:
     # the apex tests of every toe, on the first MAX_TOES toes only: the same values (more
     # toes than that, seen on no rendered frame, take the tests on every point as before)
     def tests(rows):
-        return _best_apex(rows, toe, t, h, ok, nxt_c, config)
+        return _best_apex(rows, toe, t, h, ok, nxt_c, config, hp)
 
     if n > MAX_TOES:
         n_toes = jnp.sum(toe.astype(jnp.int32))
