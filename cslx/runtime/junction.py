@@ -36,21 +36,22 @@ bar (1.0–1.7 mm high, 21–36 mm wide). There the plate-line height keeps risi
 near side: its mean within ±`RAMP_HALF_MM` one background length before the apex exceeds
 the mean at the apex by about the apex height, while before a bar it is lower (plate, or a
 flank below the bar's cap) or level (the stem's crown); an apex fails where the excess is
-over `crossing_ramp_max` × its height (no points there: no test). Issue 12, the rendered
-``cross_toe`` approaches (fresh seeds 7400–7420, 40 frames, clean / sunny; the detector
-replayed offline on each frame's recorded points, which reproduced the tracker's sightings
-and T scores exactly): false T frames 14 → 7 clean and 33 → 5 sunny (the rest: bar
-sightings 3–6 mm short, and at 7410 sunny a run-off that falls steeply from a plateau, which
-looks like a stem ending at a bar); T recall unchanged but at 7411 sunny, 72.7 → 50.0 %,
-where the bar sits at the foot of the stem's run-off and two of its sightings fail. The
-other audit conditions (base, cross on the flank and crown, T at 60° and 120°; fresh seeds
-7400–7402) and 51 development runs (seeds 1201–1206, 7301–7302, 7320–7327, both placements,
-every nuisance) are unchanged in every T score. Confirmed on fresh seeds 7440–7445 (not
-used to choose it; 12 runs): false T frames 5 → 0, T recall unchanged. 0.6: 14 / 21 false frames (clean / sunny);
-0.3 (seeds 7400–7410) also cleared 7410 sunny, but lost bar sightings at 7406 (recall −4.3 %
-clean and sunny, one more false frame). The false T's of dev seed 1205 (flank, glare and
-sunny) are another mechanism and stay (glare frame 12: corrupt points dip to z_r ≈ −3 mm
-past the bump, so that it stands high above the far side).
+over `crossing_ramp_max` × its height (no points there: no test). Evidence, the rendered
+``cross_toe`` approaches (fresh seeds 7400–7420, 40 frames, clean / sunny;
+`experiments.junction_ramp` replays the detector on each frame's recorded points, which
+reproduced the tracker's sightings and T scores exactly): false T frames 14 → 7 clean and
+33 → 5 sunny (the rest, where looked at: bar sightings 3–6 mm short at 7402 and 7406 clean,
+and at 7410 sunny a run-off that falls steeply from a plateau, which looks like a stem
+ending at a bar); T recall unchanged but at 7411 sunny, 72.7 → 50.0 %, where the bar sits
+at the foot of the stem's run-off and two of its sightings fail. The other audit conditions
+(base, cross on the flank and crown, T at 60° and 120°; fresh seeds 7400–7402) and 51
+development runs (seeds 1201–1206, 7301–7302, 7320–7327, both placements, every nuisance)
+are unchanged in every T score. Confirmed on fresh seeds 7440–7445 (not used to choose it;
+12 runs): false T frames 5 → 0, T recall unchanged. 0.6: 14 / 21 false frames (clean /
+sunny); 0.3 (seeds 7400–7410) also cleared 7410 sunny but lost bar sightings at 7406
+(recall −4.3 % clean and sunny, one more false frame). The false T's of dev seed 1205
+(flank, glare and sunny) are another mechanism and stay (glare frame 12: corrupt points dip
+to z_r ≈ −3 mm past the bump, so that it stands high above the far side).
 
 The apex tests run on the first `MAX_TOES` toes rather than on every point (a 16 × 480
 instead of a 480 × 480 comparison, twice): `crossing_feature` 1.23 → 0.76 ms in an
