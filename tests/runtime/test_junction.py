@@ -10,7 +10,6 @@ import pytest
 
 from cslx.runtime import junction
 from cslx.runtime.junction import _first_argmax, crossing_feature
-from cslx.runtime.pipeline_config import tracking_config
 from cslx.runtime.weld import WeldConfig, stripe_feature
 
 PLATE = dict(z0=0.7, gx=0.03, gy=-0.045)  # a tilted, offset plate (as in test_weld.py)
@@ -243,7 +242,7 @@ def test_run_off_the_flank_is_no_crossing():
     the rendered ``cross_toe`` approach, clean / sunny, fresh seed 7400); the ramp test
     (`WeldConfig.crossing_ramp_max`) rejects it: the plate-line height one background length
     before its apex is higher than the apex."""
-    config = tracking_config().weld
+    config = WeldConfig()  # the tracker's differs only in fields the detector does not use
     off = dataclasses.replace(config, crossing_ramp_max=float("inf"))
     seen = seen_before = 0
     for seed in range(6):
@@ -263,7 +262,7 @@ def test_run_off_the_flank_is_no_crossing():
 def test_bar_beyond_a_run_off_still_found(bar_x):
     """The crossing weld just past the run-off (the stem ends at it) is still found, in place."""
     pts, valid = _run_off(np.random.default_rng([int(bar_x), 5]), bar_x=bar_x, noise=0.05)
-    f = crossing(jnp.asarray(pts), jnp.asarray(valid), tracking_config().weld)
+    f = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig())
     assert bool(f.found) and float(f.height) >= 1.0
     assert abs(float(f.position) - bar_x) < 1.0, float(f.position)
 
