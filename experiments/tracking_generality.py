@@ -34,7 +34,27 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   bar's line (10 sightings; with 5 the 7400 run gave 100 % / 0 but a dev run a false T);
   sunny 60° at 7400 0.162 / 0.47, 100 % / 0 (5-sighting version).
 - the vertical stripe on the followed bead's toe (0.55 widths from its centre line): 7
-  false T frames (not studied further).
+  false T frames (12 sunny). The stripe crosses the bead at a shallow angle and runs off its
+  far flank onto the plate 20–30 mm before the bar; measured against the plate beyond, that
+  slope stood ≈ 1 mm high and passed for a crossing weld. Fixed by the crossing detector's
+  ramp test (`cslx.runtime.junction`, `WeldConfig.crossing_ramp_max`; replayed with
+  `experiments.junction_ramp`). Over fresh seeds 7400–7420 (clean / sunny, 21 runs each):
+  false T frames 14 → 7 and 33 → 5, T recall unchanged except 7411 sunny 72.7 → 50.0 % (a
+  bar at the foot of the run-off); at 7400 clean 100 % / 7 → 100 % / 0, sunny 100 % / 12 →
+  100 % / 0; base, cross_flank, cross_on_crown, t_60deg and t_120deg (7400–7402, clean and
+  sunny) unchanged. Confirmation on fresh seeds 7440–7445 (not used in the development):
+  false T frames 5 → 0 (7442 clean), T recall unchanged in all 12 runs (7445 sunny 81.8 %
+  either way).
+- T at 120°, why recall stays low at 7400: the bar's sightings start where the reported
+  position is still their odometry-carried median (fewer than the 10 points `bar_slope`
+  needs), and the oblique bar's crossing with the stripe moves 0.7–1.5 mm a frame against
+  1.5 mm of travel, so the report falls 3–4 mm behind for 3 frames. With 6 points
+  (`experiments.junction_ramp --bar-min-points 6`; fresh seeds 7400–7405 at 120°, 7400–7402
+  at 60°): 120° clean 7400 66.7 % / 3 → 100 % / 0, sunny 55.6 % / 7 → 100 % / 3 (7403
+  clean stays 61.5 % / 6, no other run changes), 60° sunny 7400 93.8 % / 2 → 100 % / 0; but
+  on the 51 development runs (1201–1206, 7301–7302, 7320–7327) one gains a false T (7326
+  beside sunny 100 % / 0 → 96.6 % / 1, the case described in `cslx.runtime.junction_track`),
+  as with 8 and 7 points: not changed.
 - the weld 70 mm to the robot's right (its toe at the image's edge): an estimate on 97.5 %
   of frames, offset max 1.47 mm (the view, not the tracker).
 

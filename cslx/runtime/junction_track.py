@@ -100,6 +100,7 @@ class JunctionTrack:
         fuse: str = "median",
         confirm_min: int = 2,
         bar_slope: bool = False,
+        bar_min_points: int = 10,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
@@ -113,6 +114,7 @@ class JunctionTrack:
         self.fuse = fuse
         self.confirm_min = max(int(confirm_min), 2)
         self.bar_slope = bool(bar_slope)
+        self.bar_min_points = int(bar_min_points)  # fewest plate points for the bar's line
         self.stripe_y = 0.0  # y_r of the vertical stripe (mm), from `update`
         self.stripe_line = (0.0, 0.0)  # the stripe on the wall, y_r = y0 + m x_r
         self.reset()
@@ -150,10 +152,13 @@ class JunctionTrack:
 
     def _on_bar(self, frames: list[int]) -> float:
         """Where the line through these sightings' plate points (the crossing weld's centre
-        line, `bar_slope`) meets the stripe now; NaN with fewer than 10 points, under 3 mm of
-        spread along the stripe, or no slope beyond twice its standard deviation."""
+        line, `bar_slope`) meets the stripe now; NaN with fewer than `bar_min_points` (10)
+        points, under 3 mm of spread along the stripe, or no slope beyond twice its standard
+        deviation (fewer points, tried for issue 12's T at 120°:
+        `experiments.tracking_generality`)."""
         pts = np.array([self.points[f] for f in frames if f in self.points])
-        if len(pts) < 10 or np.ptp(pts[:, 1]) < 3.0:  # no spread along the stripe: no slope
+        # too few points, or no spread along the stripe: no slope
+        if len(pts) < self.bar_min_points or np.ptp(pts[:, 1]) < 3.0:
             return math.nan
         y0, m = self.stripe_line
         # x = a + k (y − y_s), Tukey-robust, then the intersection with y = y0 + m x

@@ -100,6 +100,10 @@ class WeldConfig:
         that the apex reaches the plate past the far toe. Dev flank seeds 1201–1203 (12 runs),
         T recall 91.0 % with 0: 8 mm 99.7, 12 mm 99.5, 16 mm 99.5 % (0 false reports), 20 mm
         97.9 % with 3 false (a longer window reaches lower points beyond flank bumps).
+    crossing_ramp_max: a crossing bead's apex fails where the plate-line height one
+        `crossing_background_mm` before it exceeds the apex's by more than this share of
+        its height (the stripe running off the followed bead's flank, not a bar;
+        `cslx.runtime.junction`, "ramp test"); inf: off.
     side_cover_power: p > 0: the confidence × (min(L, R) / max(L, R))^p, L and R the share
         of the valid points with a prior weight > 0 on each side of the bead's centre, out
         to its half-chord + `cap_margin_mm` (`_side_cover`): a bead one of whose flanks the
@@ -127,6 +131,7 @@ class WeldConfig:
     crossing_mask_mm: float = 8.0
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
+    crossing_ramp_max: float = 0.4
     n_cap: int = static(8)
     side_cover_power: float = static(0.0)
     min_plate_mm: float = static(0.0)

@@ -1,6 +1,8 @@
 """The crossing weld of a T on the vertical stripe (cslx.runtime.junction) and the bead's
 position from the cap model where part of the bead is missing (cslx.runtime.weld)."""
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -204,6 +206,52 @@ def test_crossing_on_a_flank_measured_against_the_plate_beyond(bar_x, hi, lo):
     assert abs(float(f.height) - 1.9) < 0.3, float(f.height)
     old = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig(crossing_background_mm=0.0))
     assert not (bool(old.found) and float(old.height) >= 1.0) or lo == hi
+
+
+def _run_off(rng, rate=0.21, bar_x=None, bar=(14.0, 2.0), noise=0.1, n=480):
+    """The vertical stripe crossing the followed bead (15 × 2 mm, centred at x_r = 175 mm)
+    at a shallow angle: `rate` mm across the bead per mm along x_r (0.21 on the rendered
+    ``cross_toe`` approach, fresh seed 7400, frame 7), so that it climbs the near flank, runs
+    over the crown and off the far flank onto the plate over ≈ 35 mm; with `bar_x`, the stem
+    ends at a crossing weld there."""
+    x = np.linspace(218.0, 97.0, n)
+    y = -40.0 - 0.0637 * (x - 150.0)
+    h = _bead_height(rate * (x - 175.0), 15.0, 2.0)
+    if bar_x is not None:
+        h = np.maximum(np.where(x < bar_x, h, 0.0), _bead_height(x - bar_x, *bar))
+    pts = np.stack([x, y, _plate_z(x, y, PLATE) + h + rng.normal(0, noise, n)], -1)
+    return pts, rng.random(n) > 0.05
+
+
+def test_run_off_the_flank_is_no_crossing():
+    """Where the stripe runs off the followed bead's flank onto the plate, heights above the
+    plate beyond make a bump that passed the apex tests (issue 12: 7 / 12 false T frames on
+    the rendered ``cross_toe`` approach, clean / sunny, fresh seed 7400); the ramp test
+    (`WeldConfig.crossing_ramp_max`) rejects it: the plate-line height one background length
+    before its apex is higher than the apex."""
+    config = WeldConfig()  # the tracker's differs only in fields the detector does not use
+    off = dataclasses.replace(config, crossing_ramp_max=float("inf"))
+    seen = seen_before = 0
+    for seed in range(6):
+        pts, valid = _run_off(np.random.default_rng([seed, 21]))
+        for cfg, is_new in ((config, True), (off, False)):
+            f = crossing(jnp.asarray(pts), jnp.asarray(valid), cfg)
+            tall = bool(f.found) and float(f.height) >= 1.0  # the tracker's minimum height
+            if is_new:
+                seen += tall
+            else:
+                seen_before += tall
+    assert seen == 0
+    assert seen_before >= 3  # without the ramp test the run-off passes for a crossing weld
+
+
+@pytest.mark.parametrize("bar_x", [200.0, 206.0])
+def test_bar_beyond_a_run_off_still_found(bar_x):
+    """The crossing weld just past the run-off (the stem ends at it) is still found, in place."""
+    pts, valid = _run_off(np.random.default_rng([int(bar_x), 5]), bar_x=bar_x, noise=0.05)
+    f = crossing(jnp.asarray(pts), jnp.asarray(valid), WeldConfig())
+    assert bool(f.found) and float(f.height) >= 1.0
+    assert abs(float(f.position) - bar_x) < 1.0, float(f.position)
 
 
 @pytest.mark.parametrize("case", ["rising", "falling", "unsorted", "none_valid"])
