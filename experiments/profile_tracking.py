@@ -48,7 +48,8 @@ in different fusions; compiled at LLVM -O0 (the test session's level) the two di
 column, and Steger's gradient test (against finite differences) and the sharded-equals-vmap
 test failed. It came back with the selection made exact (`cslx.reductions.first_argmax`:
 the column's strongest candidate from one integer max reduction whose key carries the
-index, no equality; the tracking program's outputs identical to `38c96b3`'s). The MED part is kept (its profile sums above); alone, interleaved on the quiet
+index, no equality; the tracking program's outputs identical to `38c96b3`'s). The MED part
+is kept (its profile sums above); alone, interleaved on the quiet
 machine (``--rev 9911dcd``, 400 frames, load 0.3–1.1): median 3.43 → 3.37 ms, p10 3.16 →
 3.11, paired −0.045 ms (quartiles −0.202 / +0.078), faster in 63 % of the frames. With both
 parts,
