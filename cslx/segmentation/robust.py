@@ -440,8 +440,9 @@ def linked_extract(
         unusable = filled | blind
         first_pos, pos = pos, 0.0
         cross = None
-        if CROSSING:  # σ_t of the smoothed profile
-            t = math.hypot(final, float(np.nanmedian(np.asarray(width))))
+        if CROSSING:  # σ_t of the smoothed profile (no width measured: σ)
+            w = np.asarray(width)[np.isfinite(np.asarray(width))]
+            t = math.hypot(final, float(np.median(w)) if w.size else 0.0)
             cross = crossing.interpolated(mono2, first_pos, valid & ~bridged, t, axis=axis)
         for m2, weight in signals:
             p = first_pos
@@ -494,8 +495,7 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
-#: Step 7 interpolates the centres next to a turned cross's crossing and those whose profile
-#: the border cuts; step 5 drops centres on the border (`crossing`).
+#: Interpolate centres at a turned crossing or cut by the border; drop border ones (`crossing`).
 CROSSING = EDGE_DROP = True
 #: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
 #: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
