@@ -6,7 +6,8 @@
 - `baselines`: CM / LA / QA / AA of the paper's Table 6.
 - `ridges`, `robust`: the robust detector of issue 11 (method "linked"): candidate ridges
   linked into one path, clipped cores, width-aware σ, a predicted std per centre.
-  `presence`: its test that a stripe is there at all (laser off: no centres).
+  `presence`: its test that a stripe is there at all (laser off: no centres); `crossing`:
+  the centres a turned cross's other stripe or the image border make unmeasurable.
 - `interface`: `extract`, one interface over every method; `metrics`: the error metrics
   of docs/metrics.md.
 - `shard`: the same over frame batches and devices.

@@ -125,6 +125,8 @@ averages out): the goal's median is near that floor even without speckle.
    0.1397, 0.0358 / 0.1517 → 0.0283 / 0.1346, 0.0346 / 0.1495; +4–5 ms per stripe.
    A saturated path on a chroma-subsampled frame (JPEG, YUYV) is also re-measured on the
    luma, the two averaged (`CHROMA_REFINE`); 4:2:2 widens the clip test (all in `chroma`).
+   Centres beside a turned cross's crossing or cut by the border are interpolated, those on
+   the border dropped in step 5 (`crossing`, `CROSSING`, `EDGE_DROP`).
 8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
    strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
    up to 616 "centres" per stripe), unless it is a faint stripe with a precise, long path
@@ -136,6 +138,7 @@ Cost per frame and stripe: results/robust_extraction.md (the old default's in th
 from __future__ import annotations
 
 import functools
+import math
 
 import jax
 import jax.numpy as jnp
@@ -143,7 +146,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SIGMA_MAX
-from . import chroma, presence
+from . import chroma, crossing, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -158,20 +161,9 @@ from .ridges import (
 from .search import _unclipped_space, search_space_unclipped
 from .steger import Centres
 
-__all__ = [
-    "CLIP_LEVEL",
-    "MAX_RUN",
-    "SIGMA0",
-    "SIGMA_MIN",
-    "SIGMA_PER_WIDTH",
-    "clipped_mask",
-    "fill_clipped",
-    "white_mask",
-    "linked_extract",
-    "max_run_for",
-    "search_space_unclipped",
-    "stripe_sigma",
-]
+__all__ = ["CLIP_LEVEL", "MAX_RUN", "SIGMA0", "SIGMA_MIN", "SIGMA_PER_WIDTH", "clipped_mask",
+           "fill_clipped", "white_mask", "linked_extract", "max_run_for",
+           "search_space_unclipped", "stripe_sigma"]  # fmt: skip
 
 #: Floor, slope and ceiling of the width-aware σ. Steger's condition is σ ≥ s (Gaussian
 #: profile of std s); on the development frames (seeds 7100–7117, all conditions) a fixed σ of
@@ -365,12 +357,17 @@ def linked_extract(
     if REFINE:
         unusable = filled | blind
         first_pos, pos = pos, 0.0
+        cross = None
+        if CROSSING:  # σ_t of the smoothed profile (no width measured: σ)
+            w = np.asarray(width)[np.isfinite(np.asarray(width))]
+            t = math.hypot(final, float(np.median(w)) if w.size else 0.0)
+            cross = crossing.interpolated(mono2, first_pos, valid & ~bridged, t, axis=axis)
         for m2, weight in signals:
             p = first_pos
             for s_along in REFINE_PASSES:  # one pass by default (REFINE_PASSES)
                 p = second_pass(
-                    m2, p, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along
-                )
+                    m2, p, valid, bridged, unusable, sigma=final, axis=axis, sigma_along=s_along,
+                    interpolate=cross)  # fmt: skip
             pos = pos + weight * p if len(signals) > 1 else p
     if presence.NO_STRIPE_SIGMA is not None:  # step 8
         pos, valid, sig, sat = presence.absent(pos, valid, sig, c.strength, sat)
@@ -386,6 +383,8 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
     f = filled if axis == 0 else filled.T
     b = blind if axis == 0 else blind.T
     valid = drop_stray(jnp.nan_to_num(pos), valid)
+    if EDGE_DROP:
+        valid = valid & crossing.inside(pos, f.shape[0])
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
     # a piece left at an end once the bridging dropped what was behind it
     valid = drop_stray(jnp.nan_to_num(pos), valid)
@@ -414,6 +413,8 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 
 #: Re-measure the centres along the smoothed path (`cslx.segmentation.refine`), step 7.
 REFINE = True
+#: Interpolate centres at a turned crossing or cut by the border; drop border ones (`crossing`).
+CROSSING = EDGE_DROP = True
 #: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
 #: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
 #: (`chroma.second_signal`; None: off), its centres weighted `CHROMA_BLEND` against the colour
