@@ -64,7 +64,12 @@ ramp stopped wherever the trigger fell within a frame's travel, −1.25 to +0.2 
 mean, in a kinematic sweep at 30 mm/s and 20 fps). TURN: rotate by 90° plus the followed
 weld's last heading estimate (the crossing weld is perpendicular to the weld, not to the
 robot: a 1° heading left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld
-after the turn), ± (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0)
+after the turn) — the last within `square_deg` of the robot's heading: a tracker that
+restarts on the bar near the T reports it ≈ 90° off (Figure 22, glare, one run at
+`6826bfa`: an 88° estimate at confidence 0.21, twenty frames before the turn, took the turn
+to 100° and left the look-ahead point 22.8 mm off the new weld; the robot keeps the weld
+within a few degrees, so a larger heading is not the followed weld's) —
+± (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0)
 or on an arc; the turned angle is integrated from the commanded ω, or from the measured
 heading when the caller passes it → FOLLOW, ignoring junction sightings for
 `junction_ignore_mm` of travel. The turn ends on the crossing weld as the stripe sees it:
@@ -138,6 +143,9 @@ class ControllerConfig:
     # 1° heading estimate error (2.6 mm at 150 mm) and rejects the old weld's prediction
     # (≈ 90° off)
     turn_finish_deg: float = 3.0
+    # a weld heading beyond this (deg, from the robot's) is not the followed weld's: it
+    # neither sets the turn's extra angle nor ends a turn (module docstring, TURN)
+    square_deg: float = 15.0
 
     def __post_init__(self):
         if self.turn_direction not in (-1, 1):
@@ -306,8 +314,9 @@ class PathController:
             self._advance_junction(self.v, dt)
             return self._emit(0.0, 0.0)  # blind: stop now, keep the state
 
-        if self.state is not State.TURN and math.isfinite(_finite(heading_deg, math.nan)):
-            self._weld_heading = math.radians(float(heading_deg))
+        h = _finite(heading_deg, math.nan)
+        if self.state is not State.TURN and math.isfinite(h) and abs(h) <= c.square_deg:
+            self._weld_heading = math.radians(h)
         if self.state is State.TURN:
             if robot_heading_rad is not None:
                 if self._turn_start_heading is None:
@@ -459,11 +468,11 @@ class PathController:
         on the weld after a further rotation `turn_direction` · atan(e / x_ref). It replaces
         the odometric remainder when the two agree within `turn_finish_deg` (the observation
         is of the new weld, not the old one's prediction ≈ 90° off) and the weld is seen
-        about square (|θ| ≤ 15°, or its heading unknown). Returns the remaining angle."""
+        about square (|θ| ≤ `square_deg`, or its heading unknown). Returns the remaining angle."""
         c = self.config
         if c.turn_finish_deg <= 0.0:
             return remaining
-        if math.isfinite(_finite(heading_deg, math.nan)) and abs(heading_deg) > 15.0:
+        if math.isfinite(_finite(heading_deg, math.nan)) and abs(heading_deg) > c.square_deg:
             return remaining
         r = c.turn_direction * math.atan2(offset_mm, c.lookahead_mm)
         if abs(r - remaining) > math.radians(c.turn_finish_deg):

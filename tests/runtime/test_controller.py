@@ -390,6 +390,27 @@ def test_turn_squares_to_the_crossing_weld(direction):
     assert travelled == pytest.approx(x_j, abs=1.0)  # at rest on the T, not past it
 
 
+def test_a_heading_far_from_square_does_not_set_the_turn():
+    """Near the T a tracker that restarted on the bar reports its heading, ≈ 90° (Figure 22,
+    glare): the turn keeps the followed weld's last heading within `square_deg` (+2°), not
+    90° + 10° (the extra angle's clip)."""
+    ctrl = PathController(ControllerConfig())
+    dt, x_j = 0.05, 60.0
+    for _ in range(10):
+        ctrl.update(dt, 0.0, 2.0, 1.0, junction=True, junction_x_mm=x_j)
+        x_j -= ctrl.v * dt
+    ctrl.update(dt, 88.0, 88.0, 0.25)  # the bar, barely confident
+    x_j -= ctrl.v * dt
+    turned = 0.0
+    for _ in range(400):
+        cmd = ctrl.update(dt, math.nan, math.nan, 0.0, sensor_ok=True)
+        turned += cmd.omega_rad_s * dt
+        if ctrl.turns_completed:
+            break
+    assert ctrl.turns_completed == 1
+    assert math.degrees(turned) == pytest.approx(92.0, abs=0.6)
+
+
 @pytest.mark.parametrize("heading_deg", [-2.0, 1.5])
 def test_junction_distance_is_taken_along_the_robot_axis(heading_deg):
     """A crossing weld perpendicular to a weld at heading θ, sighted on the vertical stripe
