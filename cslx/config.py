@@ -27,6 +27,7 @@ __all__ = [
     "COLOUR_GRID",
     "MOTION",
     "RIG",
+    "SEARCH_CLIP_LEVEL",
     "SEARCH_STRIDE",
     "SIGMA_MAX",
     "Motion",
@@ -39,6 +40,11 @@ __all__ = [
 COLOUR_GRID = tuple(w for w in itertools.product(range(3), range(-2, 3), range(-2, 3)) if any(w))
 #: 8-bit value at and above which a channel is treated as clipped.
 CLIP_LEVEL = 254.0
+#: The kurtosis colour searches (the extractor's and the tracker's) also leave out pixels with
+#: a channel at or above this level: a JPEG-compressed clipped core sits at 251–255 with
+#: smeared green and blue (evidence at `cslx.segmentation.search.SEARCH_CLIP_LEVEL` and
+#: `cslx.runtime.stripe_colour`).
+SEARCH_CLIP_LEVEL = 240.0
 #: The kurtosis search scores every SEARCH_STRIDE-th column (row) of the frame.
 SEARCH_STRIDE = 8
 #: Steger σ ceiling (px) up to 480 px frames; above, ×min(H, W)/480 (the stripe's width in

@@ -11,9 +11,10 @@ together with Steger's σ (`cslx.runtime.stripe_width`):
 1. the paper's kurtosis search (`search`): the 74-space integer grid
    (`cslx.segmentation.colour.CANDIDATES`) scored by the normalized kurtosis (eq. (12),
    correction 4) of every 8th column (horizontal stripe) plus every 8th row (vertical
-   stripe), clipped pixels replaced by the frame's median colour as in the robust
-   extractor's clip-aware search (`cslx.segmentation.robust.search_space_unclipped`), the
-   best space's sign chosen to make the stripes bright (positive skewness on both);
+   stripe), pixels with a channel ≥ `cslx.config.SEARCH_CLIP_LEVEL` (240) replaced by the
+   frame's median colour as in the robust extractor's clip-aware search
+   (`cslx.segmentation.search`), the best space's sign chosen to make the stripes bright
+   (positive skewness on both);
 2. the configured weights stay unless they clearly fail (`choose_weights`): a stripe is
    dark in them (skewness below `DARK`), or their kurtosis is below `KEEP` × the searched
    space's. Otherwise the searched weights are compiled once (one program per (σ, weights),
@@ -51,6 +52,20 @@ ratio ≤ 0.017 sunny), gross 44.5 (30–57) / 66.0 (16–143) → 3.0 (0–10) 
 final `DARK` = −1 and `MIN_KURTOSIS` choose the same weights on all 60 first frames (3
 lasers × 20 seeds: the blue sunny ones, skewness ≈ 0, switch on the kurtosis test).
 
+Clipped pixels. JPEG leaves a clipped red core at 251–255 with smeared green and blue, so
+the sensor's clip level (254) left part of it in the moments and the near-white core scored
+for G − B-like spaces. With 240 (the extractor's search level): JPEG q70 saturated frames
+(`experiments.ood_extraction`'s condition, fresh seed 7612, 4 frames, weights and σ as the
+tracker chooses them, `tracking_config`, a cold frame then a tracking frame): frames 0 and 2
+had switched to (0, 1, −1) / (0, 2, −2) at σ 2 px, median 3-D error H 0.287 / 0.322, V 0.353
+/ 0.318 mm, gross 3.29 / 4.87 and 9.22 / 7.92 %; they now keep R − G, whose width check
+gives σ 5.5 px: H 0.101 / 0.114, V 0.138 / 0.144 mm, gross 1.56 / 2.50 and 2.10 / 3.34 %
+(frames 1 and 3 kept R − G before as well: unchanged). The same weights as with 254 on the
+65 other frames checked: the 36 of this evidence (red, green and blue, seeds 8800–8805), the
+18 development conditions of `experiments.robust_extraction` (seeds 7100–7117, frame 0) and
+the default rig's audit conditions of `experiments.ood_extraction` (seed 7400, frame 0; the
+one changed frame was JPEG q70 saturated again, to R − G).
+
 The check costs ≈ 18 ms per frame at 640×480 (NumPy, load 4–5; the channels' joint
 moments once per stripe as batched matrix products, the configured space scored with the
 grid: 100–180 ms in the same run when each space set recomputed them with `einsum`), once
@@ -64,7 +79,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import CLIP_LEVEL, COLOUR_GRID, SEARCH_STRIDE
+from ..config import COLOUR_GRID, SEARCH_CLIP_LEVEL, SEARCH_STRIDE
 
 __all__ = ["CANDIDATES", "DARK", "KEEP", "MIN_KURTOSIS", "choose_weights", "search", "space_scores"]
 
@@ -83,13 +98,13 @@ MIN_KURTOSIS = 10.0
 
 
 def _segments(rgb: np.ndarray, axis: int) -> np.ndarray:
-    """(M, N, 3) float: every SEARCH_STRIDE-th column (axis 0) or row (axis 1), clipped
-    pixels set to the frame's median colour."""
+    """(M, N, 3) float: every SEARCH_STRIDE-th column (axis 0) or row (axis 1), pixels with
+    a channel ≥ SEARCH_CLIP_LEVEL set to the frame's median colour."""
     x = np.asarray(rgb)
     x = x[:, ::SEARCH_STRIDE] if axis == 0 else x[::SEARCH_STRIDE].transpose(1, 0, 2)
     x = x.astype(np.float32)
     median = np.median(np.asarray(rgb)[::7, ::7].reshape(-1, 3), axis=0).astype(np.float32)
-    return np.where(np.any(x >= CLIP_LEVEL, -1, keepdims=True), median, x)
+    return np.where(np.any(x >= SEARCH_CLIP_LEVEL, -1, keepdims=True), median, x)
 
 
 def space_scores(rgb: np.ndarray, weights: np.ndarray, axis: int):

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import config as _config
 from ..config import CLIP_LEVEL, SEARCH_STRIDE
 from .clipped import clipped_mask
 from .ridges import _median
@@ -48,7 +49,7 @@ __all__ = ["SEARCH_CLIP_LEVEL", "search_mask", "search_space_unclipped"]
 #: (frame 0) 0.063 / 0.290 → 0.067 / 0.262; the corner-aimed rig, clean, H (frame 1) 0.0258
 #: / 0.087 → 0.0272 / 0.088. The green / blue lasers, JPEG q70 saturated, the thin stripe on
 #: 4 / 10 mm print, 1280×720 and the 20°-turned cross kept their spaces.
-SEARCH_CLIP_LEVEL: float | None = 240.0
+SEARCH_CLIP_LEVEL: float | None = _config.SEARCH_CLIP_LEVEL
 
 
 def search_mask(image, clipped):

@@ -47,3 +47,19 @@ def test_no_stripe_keeps_the_configured_weights():
 def test_search_signs_the_space_bright():
     weights, score = search(_cross((0.12, 1.0, 0.2)))
     assert weights[1] > 0 and score > 10
+
+
+def test_near_clipped_jpeg_core_is_left_out_of_the_moments():
+    """A JPEG-compressed clipped core sits at 251–255 with smeared green and blue: every pixel
+    with a channel ≥ `SEARCH_CLIP_LEVEL` (240) is replaced by the frame's median colour, as
+    in the extractor's search; a bright but unclipped stripe pixel is kept."""
+    from cslx.config import SEARCH_CLIP_LEVEL
+    from cslx.runtime.stripe_colour import _segments
+
+    img = np.full((480, 640, 3), 60, np.uint8)
+    img[:, 0] = (252, 246, 244)  # column 0 is sampled (every 8th column)
+    img[:, 8] = (230, 100, 90)
+    seg = _segments(img, axis=0)  # (rows, sampled columns, 3)
+    assert SEARCH_CLIP_LEVEL == 240.0
+    np.testing.assert_array_equal(seg[:, 0], np.full((480, 3), 60.0))
+    np.testing.assert_array_equal(seg[:, 1], np.tile([230.0, 100.0, 90.0], (480, 1)))
