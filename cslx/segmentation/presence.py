@@ -39,12 +39,12 @@ A faint stripe (issue 11 generality audit, `experiments/ood_extraction.py`: a 0.
 laser power 60 over 10 mm printed squares, fresh seed 7414, frame 0) is a clean, continuous
 path — every row found, 0.060 px median error, median σ 0.199 px — whose median z is only
 15.9 (half of it crosses black squares), and the z limit above dropped it whole. So a second,
-stricter tier lets a weak stripe through when its path is also precise and long: median σ
-≤ `FAINT_SIGMA` (0.3 px), median z ≥ `FAINT_Z` (12) and valid centres on at least
-`FAINT_FOUND` (half) of the columns (rows). On the laser-off statistics above no stripe
-meets it: the laser-off stripes with z in [12, 18) all have σ ≥ 0.446 (factor 1.49), and the
-highest z at σ ≤ 0.3 over half the columns is 9.38 (cross/green frame 0, horizontal, 585
-centres; factor 1.28), at σ ≤ 0.3 on any length 10.2 (a 32-centre piece). Every laser-on
+stricter tier lets a weak stripe through when its path is also precise and long: median σ ≤
+`FAINT_SIGMA` (0.3 px then, 0.33 now: below), median z ≥ `FAINT_Z` (12) and valid centres on
+at least `FAINT_FOUND` (half) of the columns (rows). On the laser-off statistics above no
+stripe meets it: the laser-off stripes with z in [12, 18) all have σ ≥ 0.446 (factor 1.49),
+and the highest z at σ ≤ 0.3 over half the columns is 9.38 (cross/green frame 0, horizontal,
+585 centres; factor 1.28), at σ ≤ 0.3 on any length 10.2 (a 32-centre piece). Every laser-on
 stripe above passes the first tier already (z ≥ 35), so they are unchanged. The colour
 search's near-clipped mask (`search.SEARCH_CLIP_LEVEL`, same change) picks another space in 4
 of the 90 laser-off and no-laser searches (frames 0–1 and the synthetic frames); run again
@@ -53,6 +53,20 @@ faint tier: factors 1.17 and 1.08), sunny 7102/0 H 18 centres at z 10.0, the rus
 σ 0.287, z 7.5 over 15 %, uniform noise none: all still dropped. Held out (seed 7474, 4
 frames of the thin stripe over 10 mm squares): one vertical stripe rescued (z 17.7, σ
 0.155), one still dropped (σ 0.342, z 13.4, a poor path: 0.142 px median error).
+
+`FAINT_SIGMA` 0.3 → 0.33 (after that audit). On fresh seeds (7600 and 7620 + condition, 8
+frames each of the thin stripe over 4 and 10 mm squares, 64 stripes) laser-on thin stripes
+scored median σ 0.093–0.311 px at z 13.7–29.5, every row or column found, and 0.3 dropped
+one whole vertical stripe (7600 over 4 mm squares, frame 3: σ 0.311, z 16.2; its path was
+good, 0.071 mm median error once kept, no gross centre). The laser-off statistics rerun at
+this commit (`experiments/no_stripe.py --frames 2`, 58 laser-off or no-laser stripes with
+centres): none with z in [12, 18) below σ 0.447 (cross/saturated_sunny frame 1, vertical,
+z 15.0: factor 1.35), and the nearest in σ, a glare sheen line at σ 0.350 (cross/glare
+frame 0, horizontal, 94 % of the columns), has z 11.1 < `FAINT_Z`; every laser-off stripe
+is dropped as before, and laser-on stripes of the benchmark pass the first tier (z ≥ 36.4).
+Confirmation on seed 7640 (the same 2 × 8 frames, after the change): all 32 stripes found;
+σ up to 0.382 px, but at z ≥ 18 (first tier); below z 18, σ ≤ 0.232. The limit stays a
+compromise: a thin stripe with σ 0.35 at z 16 would still be dropped.
 
 Not tested per piece: a stripe that is partly absent (the laser's end in view with sheen
 linked beyond it) keeps its pieces; the development frames hold no such case to set a
@@ -82,7 +96,7 @@ NO_STRIPE_Z = 18.0
 #: A fainter stripe is kept when its path is precise and long (module docstring): median σ
 #: (px) at most `FAINT_SIGMA`, median z at least `FAINT_Z`, centres on at least `FAINT_FOUND`
 #: of the columns (rows).
-FAINT_SIGMA = 0.3
+FAINT_SIGMA = 0.33
 FAINT_Z = 12.0
 FAINT_FOUND = 0.5
 

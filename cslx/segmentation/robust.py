@@ -130,7 +130,7 @@ averages out): the goal's median is near that floor even without speckle.
 8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
    strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
    up to 616 "centres" per stripe), unless it is a faint stripe with a precise, long path
-   (σ ≤ 0.3 px, strength ≥ 12, over half the columns); no laser-on development frame
+   (σ ≤ 0.33 px, strength ≥ 12, over half the columns); no laser-on development frame
    changes (bit-identical).
 Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """

@@ -109,9 +109,11 @@ def test_absent_keeps_a_faint_stripe_only_when_its_path_is_precise_and_long():
     assert kept(0.199, 15.9, 0.6)
     assert not kept(0.199, 15.9, 0.4)  # a short piece needs the first tier's strength
     assert kept(0.199, 20.0, 0.4)
+    assert kept(0.311, 16.2, 1.0)  # fresh seed 7600, 4 mm squares, frame 3 (σ limit 0.3 lost it)
     # the nearest laser-off stripes of the no-stripe experiment stay out
     assert not kept(0.447, 15.0, 0.8)  # z in [12, 18) but σ ≥ 0.446
     assert not kept(0.208, 9.4, 0.91)  # long and precise, but z 9.4
+    assert not kept(0.350, 11.1, 0.94)  # a glare sheen line: z below FAINT_Z
     assert not kept(0.026, 10.2, 0.05)
 
 
