@@ -148,7 +148,11 @@ frame and stripe of the audit at 7400 (124 of 128) bit-identical. Development be
 all 36 frame-stripes bit-identical (pooled H / V 100.00 / 99.92 %, 0 gross, 0.0283 /
 0.0277 mm, p95 0.123 / 0.127). The detection lost to the trim (≈ 0.3–0.9 %) is the ≈ 5
 columns inside the end whose first-pass profiles mix the missing part. Cost: the trim 0.6 ms
-per stripe alone (640 columns, jit, dispatch included). Not fixed: the cross turned 45°
+per stripe alone (640 columns, jit, dispatch included). Held out (seed 7480 + condition, 4
+frames, run once at the end): roll35/sunny H 48.53 → 96.19 %, dropped 2 → 0 of 4, gross 1.35
+(15) → 0.82 (18; two more frames scored), 0.041 / 0.320 → 0.044 / 0.305 mm, fp 21 → 0;
+roll35/saturated H 98.02 → 97.80, 0.58 (13) → 0.18 (4), 0.046 / 0.205 → 0.045 / 0.208, fp
+67 → 0; V unchanged on both (bit for bit). Not fixed: the cross turned 45°
 (fresh 7500–7502, no-stripe test off: 88–97 % detection but 9–328 gross centres and 100–196
 false positives a stripe, clean or sunny): beyond the crossing step's reach.
 """
