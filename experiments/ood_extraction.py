@@ -116,6 +116,45 @@ their pull ≤ 0.08 px on the synthetic cross): development H medians moved by u
 can depend on the frames the process extracted before it (development frame 7104 H: median
 0.028 mm after frames 7100–7103, 0.035 mm alone — main's code — or after the audit's
 frames; up to 0.24 px apart): compare variants on the same frame sequence.
+
+The turned cross's whole-stripe drops and its oblique end, fixed (branch roll11r). Fresh seeds
+7500–7515 (frames 0–1; not the held-out 7480–7499), the no-stripe test off: the horizontal
+stripe was there on every frame (96–100 % of the columns, output median 0.03–0.07 px), and
+the first stage to drop it was the no-stripe test (`cslx.segmentation.presence`): its σ
+limit (0.4 px) met the first pass's σ of a turned stripe, 0.40–0.57 px at z 65–332 (the
+first pass smooths along the image axis, so a turned stripe's column profile is smeared and
+its path rough; the second pass, along the path, is what makes the output precise). The
+test now keeps a strong stripe (median z ≥ 60, above every laser-off path's ≤ 49.9, σ ≤
+1.5 px); evidence in `presence`. The tail: the first pass's smoothing along the axis leaves
+a ridge for ≈ 2 σ_along past the fan's end that stays near the end's row, and the path
+followed it (7502/0 H: columns 38–49 past the end at 50, 1.0–1.3 px off the stripe's line,
+and columns 50–53 biased 2.9–1.6 px); `cslx.segmentation.ends` cuts a turned path's end
+where two consecutive centres leave the line through the path further inside by > 1 px.
+Before → after (presence tier alone / with the trim), one process, same frame order, H / V:
+detection %, gross % (count), median / p95 mm, false positives, stripes dropped whole.
+Fresh seeds 7516–7523, frames 0–1 (16 frames per condition): roll35/sunny H 91.55 → 97.53
+/ 96.84, 0.57 (48) → 0.58 (52) / 0.19 (17), 0.036 / 0.236 → 0.037 / 0.237 / 0.035 / 0.218,
+fp 184 → 193 / 0, dropped 1 → 0; roll35/clean (no nuisance) H 24.29 → 98.02 / 97.49, 0.31
+(7) → 0.44 (40) / 0.03 (3), 0.031 / 0.166 → 0.034 / 0.193 / 0.029 / 0.172, fp 53 → 217 /
+0, dropped 12 → 0; V 67.72 → 97.69, dropped 5 → 0, 0.029 / 0.181 → 0.028 / 0.174 (the
+trim: no change); roll35/saturated H 97.96 → 97.83 (trim),
+0.60 (54) → 0.27 (24), 0.039 / 0.194 → 0.035 / 0.180, fp 277 → 2; V unchanged; roll20/clean
+unchanged (bit for bit). Pooled over the four, H 78.98 → 98.42 / 98.09 %, 109 → 146 / 44
+gross, fp 568 → 741 / 56; V 90.73 → 98.10 %. Seed 7400 (2 frames): roll35/sunny H 97.81 →
+96.93 %, 0.54 (6) → 0 gross, 0.047 / 0.290 → 0.044 / 0.230, fp 23 → 0; roll35/saturated H
+98.22 → 98.14, 0.60 (7) → 0.26 (3), 0.036 / 0.271 → 0.031 / 0.251, fp 35 → 0; every other
+frame and stripe of the audit at 7400 (124 of 128) bit-identical. Development benchmark
+(`robust_extraction`'s 18 conditions, seeds 7100–7117, frame 0, both stripes, same process):
+all 36 frame-stripes bit-identical (pooled H / V 100.00 / 99.92 %, 0 gross, 0.0283 /
+0.0277 mm, p95 0.123 / 0.127). The detection lost to the trim (≈ 0.3–0.9 %) is the ≈ 5
+columns inside the end whose first-pass profiles mix the missing part. Cost: the trim 0.6 ms
+per stripe alone (640 columns, jit, dispatch included). Held out (seed 7480 + condition, 4
+frames, run once at the end): roll35/sunny H 48.53 → 96.19 %, dropped 2 → 0 of 4, gross 1.35
+(15) → 0.82 (18; two more frames scored), 0.041 / 0.320 → 0.044 / 0.305 mm, fp 21 → 0;
+roll35/saturated H 98.02 → 97.80, 0.58 (13) → 0.18 (4), 0.046 / 0.205 → 0.045 / 0.208, fp
+67 → 0; V unchanged on both (bit for bit). Not fixed: the cross turned 45°
+(fresh 7500–7502, no-stripe test off: 88–97 % detection but 9–328 gross centres and 100–196
+false positives a stripe, clean or sunny): beyond the crossing step's reach.
 """
 
 from __future__ import annotations

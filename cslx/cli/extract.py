@@ -405,14 +405,10 @@ def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats, rec
 
 def no_stripe_line(path, stripe: str) -> str:
     """The line `cslx extract` prints for a stripe the linked detector did not find."""
-    from ..segmentation import presence as p
+    from ..segmentation import presence
 
     name = {"h": "horizontal", "v": "vertical"}[stripe]
-    return (
-        f"no stripe found in {path} ({name}): no line of centres with median σ ≤ "
-        f"{p.NO_STRIPE_SIGMA:g} px and strength ≥ {p.NO_STRIPE_Z:g} × noise, or ≤ {p.FAINT_SIGMA:g}"
-        f" px and ≥ {p.FAINT_Z:g} × noise on ≥ {p.FAINT_FOUND:.0%} (laser off? out of view?)"
-    )
+    return f"no stripe found in {path} ({name}): {presence.criteria()} (laser off? out of view?)"
 
 
 def _write_block(out, path, stripe, uv, sensor, extra=None) -> None:

@@ -7,7 +7,8 @@
 - `ridges`, `robust`: the robust detector of issue 11 (method "linked"): candidate ridges
   linked into one path, clipped cores, width-aware σ, a predicted std per centre.
   `presence`: its test that a stripe is there at all (laser off: no centres); `crossing`:
-  the centres a turned cross's other stripe or the image border make unmeasurable.
+  the centres a turned cross's other stripe or the image border make unmeasurable; `ends`:
+  the first pass's tail past a turned stripe's end inside the frame.
 - `interface`: `extract`, one interface over every method; `metrics`: the error metrics
   of docs/metrics.md.
 - `shard`: the same over frame batches and devices.

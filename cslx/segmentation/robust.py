@@ -126,11 +126,13 @@ averages out): the goal's median is near that floor even without speckle.
    A saturated path on a chroma-subsampled frame (JPEG, YUYV) is also re-measured on the
    luma, the two averaged (`CHROMA_REFINE`); 4:2:2 widens the clip test (all in `chroma`).
    Centres beside a turned cross's crossing or cut by the border are interpolated, those on
-   the border dropped in step 5 (`crossing`, `CROSSING`, `EDGE_DROP`).
+   the border dropped in step 5 (`crossing`, `CROSSING`, `EDGE_DROP`), and so is the first
+   pass's tail past a turned stripe's end inside the frame (`ends`, `END_TRIM`).
 8. No stripe (`cslx.segmentation.presence`): a path with median `sigma` > 0.4 px or median
    strength < 18 × the ridge noise is dropped whole (laser off in sun: the bead's sheen gave
    up to 616 "centres" per stripe), unless it is a faint stripe with a precise, long path
-   (σ ≤ 0.33 px, strength ≥ 12, over half the columns); no laser-on development frame
+   (σ ≤ 0.33 px, strength ≥ 12, over half the columns) or a strong one (strength ≥ 60,
+   σ ≤ 1.5 px: a turned cross's first pass is rough); no laser-on development frame
    changes (bit-identical).
 Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """
@@ -146,7 +148,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SIGMA_MAX
-from . import chroma, crossing, presence
+from . import chroma, crossing, ends, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -348,7 +350,9 @@ def linked_extract(
         final = stripe_sigma(width, min(mono.shape))
         if final != first:
             c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
-    pos, valid, sig, sat, bridged = _finish(c.pos, c.valid, c.sigma, filled, blind, axis=axis)
+    pos, valid, sig, sat, bridged = _finish(
+        c.pos, c.valid, c.sigma, filled, blind, axis=axis, trim=END_TRIM
+    )
     signals = [(mono2, 1.0)]
     if sub and not pairs and chroma.saturated_share(sat, valid) >= CHROMA_SATURATED:
         kw = dict(axis=axis, variant=CHROMA_REFINE, max_run=max_run_for(image.shape[:2]))
@@ -376,15 +380,17 @@ def linked_extract(
     )
 
 
-@functools.partial(jax.jit, static_argnames=("axis",))
-def _finish(pos, valid, sigma, filled, blind, *, axis: int):
+@functools.partial(jax.jit, static_argnames=("axis", "trim"))
+def _finish(pos, valid, sigma, filled, blind, *, axis: int, trim: bool = False):
     """Path smoothing (`cslx.segmentation.path`), bridging (`_bridge`) and the `saturated`
-    flags, in one compiled call."""
+    flags, in one compiled call; `trim`: the tail past a turned stripe's end (`ends`)."""
     f = filled if axis == 0 else filled.T
     b = blind if axis == 0 else blind.T
     valid = drop_stray(jnp.nan_to_num(pos), valid)
     if EDGE_DROP:
         valid = valid & crossing.inside(pos, f.shape[0])
+    if trim:
+        valid = ends.oblique_ends(jnp.nan_to_num(pos), valid, f.shape[0])
     pos, valid, sig, bridged = _bridge(pos, valid, sigma, b)
     # a piece left at an end once the bridging dropped what was behind it
     valid = drop_stray(jnp.nan_to_num(pos), valid)
@@ -415,6 +421,8 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int):
 REFINE = True
 #: Interpolate centres at a turned crossing or cut by the border; drop border ones (`crossing`).
 CROSSING = EDGE_DROP = True
+#: Drop the first pass's tail past a turned stripe's end inside the frame (`ends`), step 5.
+END_TRIM = True
 #: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
 #: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
 #: (`chroma.second_signal`; None: off), its centres weighted `CHROMA_BLEND` against the colour
