@@ -116,7 +116,7 @@ import numpy as np
 from ..config import MOTION
 from .bead_near import near_for, refit_near
 from .junction_track import JunctionTrack, cut_by_view
-from .line_filter import KalmanConfig, WeldLineFilter, width_weight
+from .line_filter import KalmanConfig, WeldLineFilter, fit_line, width_weight
 from .path_heading import PathHeading
 from .step_program import step_program
 from .stripe_colour import choose_weights
@@ -530,7 +530,7 @@ class Tracker:
                 refit_near(raw, np.asarray(points_h), self, self.config.weld)
             conf = raw["h_confidence"] * self._width_factor(raw["h_width_mm"])
             accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
-            if accepted:
+            if accepted and math.isfinite(raw["h_width_mm"]):
                 self._widths.append(raw["h_width_mm"])
             wh = self._path.update(
                 kf, raw["h_x_mm"], raw["h_y_mm"], conf, raw["h_width_mm"], accepted
@@ -590,8 +590,7 @@ class Tracker:
             both = np.all(np.isfinite(points_v[:, :2]), axis=1)
             xy = points_v[both, :2]
             if len(xy) >= 10 and np.ptp(xy[:, 0]) > 0:
-                m, y0 = np.polyfit(xy[:, 0], xy[:, 1], 1)  # the stripe: y_r = y0 + m x_r
-                line = (float(y0), float(m))
+                line = fit_line(xy[:, 0], xy[:, 1])  # the stripe: y_r = y0 + m x_r
         xj = self._junctions.update(obs.frame, x, extent, y, line)
         if math.isfinite(xj):
             obs.junction = True

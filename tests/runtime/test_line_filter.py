@@ -230,3 +230,15 @@ def test_tracker_needs_three_agreeing_sightings_to_confirm_a_junction():
     bar = lambda k: 212.0 - 1.5 * k  # noqa: E731
     out = _run(track(), [bar, bar, bar, None])
     assert math.isnan(out[1]) and out[2] == pytest.approx(bar(2))
+
+
+def test_fit_line_is_polyfit():
+    """`fit_line` (the tracker's stripe line in closed form) is `np.polyfit(x, y, 1)`."""
+    from cslx.runtime.line_filter import fit_line
+
+    rng = np.random.default_rng(4)
+    for n in (10, 57, 480):
+        x = rng.normal(60.0, 15.0, n)
+        y = -12.0 + 0.3 * x + rng.normal(0.0, 0.4, n)
+        m, y0 = np.polyfit(x, y, 1)
+        np.testing.assert_allclose(fit_line(x, y), (y0, m), rtol=1e-12, atol=1e-12)
