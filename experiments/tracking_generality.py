@@ -91,8 +91,18 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   a bead and 2 gated ones (beads 25–39 mm wide against 12.0). The frames without a bead at
   7400 (37–39 at 15°, 23 and 38–39 at 25°) fall where the bar (x_r ≈ 180 mm) nears the
   leaning stripe's far end (x_r 141–180 mm across the image at 15°): not diagnosed further.
-  Not changed here (audit only): x_ref where plane 0 meets the wall at y_r = 0 (or e
-  reported at the stripe), and bands that follow a leaning stripe.
+  Fixed in the tracker: the offset is now reported where the stripe crosses the filtered
+  weld line on the wall (`cslx.runtime.line_filter.offset_at_stripe`, plane 0 at z_r = 0,
+  as docs/contracts.md defines `offset_mm`); on the default rig that point is x_ref
+  (base 7400 clean / sunny unchanged: 0.136 / 0.28, 0.159 / 0.47). After (same seeds,
+  clean): 15° 7400 0.075 / 0.57, 7401 0.117 / 0.36; 25° 7400 0.155 / 0.49, 7401 0.152 /
+  0.52 — every offset goal met; heading, estimate and T as before (25° 7401 T recall 95 %).
+  Sunny: 15° 7400 0.252 / 0.65 → 0.130 / 0.79, 7401 0.430 / 0.90 → 0.196 / 0.45; 25°
+  7400 0.585 / 1.03 → 0.166 / 0.61, 7401 0.861 / 1.58 → 0.445 / 1.29 (still missed: the
+  frames without a bead and the 25–39 mm beads above, not the reference point).
+  Not changed: bands that follow a leaning stripe (the full frame costs time only), and the
+  controller's look-ahead (`ControllerConfig.lookahead_mm`, x_ref), 8–21 mm short of where
+  a rolled stripe reports the offset.
 
 Run with ``python -m experiments.tracking_generality --seed 7400 --frames 32
 [--condition NAME …] [--nuisance N …] --out DIR``. Seeds: fresh ones (7400+), never the

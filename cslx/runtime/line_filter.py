@@ -479,6 +479,20 @@ def width_weight(width: float, widths, tol: float) -> float:
     return 1.0 if abs(u) <= 1.0 else 1.0 / (u * u)
 
 
+def offset_at_stripe(e: float, tan_theta: float, x_ref: float, wall) -> float:
+    """y_r of the weld line y_r = e + tan θ (x_r − x_ref) where the horizontal stripe crosses
+    it on the wall (docs/contracts.md, `offset_mm`): the stripe is laser plane 0 at z_r = 0,
+    the line ``wall`` = (a, b, c), a x_r + b y_r + c = 0. On a rig whose stripe runs straight
+    across (b = 0, the default) that x_r is x_ref and the offset is e; with the projector
+    rolled it is not (15° / 25°: 8–21 mm further on, `experiments/tracking_generality.py`)."""
+    a, b, c = wall
+    den = a + b * tan_theta
+    if not abs(den) > 1e-12 * (abs(a) + abs(b)):
+        return float(e)
+    x = (-c - b * (e - tan_theta * x_ref)) / den
+    return float(e + tan_theta * (x - x_ref))
+
+
 def fit_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """(y0, m) of the least-squares line y = y0 + m x: `np.polyfit(x, y, 1)` in closed form
     (the normal equations about the means; within 1e-12 of it, ≈ 10 µs against ≈ 60 µs)."""

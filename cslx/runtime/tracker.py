@@ -116,7 +116,7 @@ import numpy as np
 from ..config import MOTION
 from .bead_near import near_for, refit_near
 from .junction_track import JunctionTrack, cut_by_view
-from .line_filter import KalmanConfig, WeldLineFilter, fit_line, width_weight
+from .line_filter import KalmanConfig, WeldLineFilter, fit_line, offset_at_stripe, width_weight
 from .path_heading import PathHeading
 from .step_program import step_program
 from .stripe_colour import choose_weights
@@ -164,8 +164,8 @@ class Observation:
     """What the tracker reports for one frame (docs/contracts.md, tracking log; NaN = unknown).
 
     frame: index of the frame (0, 1, …). t: capture time, s. offset_mm, heading_deg: the
-    filtered weld line. heading_sd_deg: the heading's standard deviation (reported whether or
-    not the heading is: NaN heading while it is ≥ `KalmanConfig.heading_valid_deg`).
+    filtered weld line (y_r where the stripe crosses it, `offset_at_stripe`). heading_sd_deg:
+    its sd (reported even while the heading, NaN, is ≥ `KalmanConfig.heading_valid_deg`).
     bead_width_mm, bead_height_mm: this frame's bead (NaN if none).
     junction, junction_x_mm, junction_y_mm: a confirmed crossing weld, its x_r and the y_r
     where it was measured (the vertical stripe). confidence: [0, 1].
@@ -388,6 +388,8 @@ class Tracker:
         """
         s = self.sensor
         n = np.asarray(s.planes, float)[s.plane_index(0)]
+        n_r = np.asarray(s.R_cr, float) @ n  # the plane in the robot frame: on the wall z_r = 0
+        self._wall = (n_r[0], n_r[1], 1.0 - n_r @ np.asarray(s.T_cr, float))  # `offset_at_stripe`
         X_c = np.array([0.0, 0.0, -1.0 / n[2]]) if n[2] != 0 else np.full(3, np.nan)
         return float(np.asarray(s.R_cr, float)[0] @ X_c + float(np.asarray(s.T_cr, float)[0]))
 
@@ -564,7 +566,7 @@ class Tracker:
             self._confidence *= c.decay
             obs.status = "no bead" if raw["h_found"] < 0.5 else "bead rejected (gate)"
         if kf.initialised:
-            obs.offset_mm = float(kf.x[0])
+            obs.offset_mm = offset_at_stripe(kf.x[0], math.tan(kf.x[1]), self.x_ref, self._wall)
             sd_e, sd_th = math.sqrt(kf.P[0, 0]), math.sqrt(kf.P[1, 1])
             if c.heading_valid_model and math.isfinite(self._path.model_var):
                 sd_th = max(sd_th, math.sqrt(self._path.model_var))

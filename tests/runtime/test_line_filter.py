@@ -242,3 +242,22 @@ def test_fit_line_is_polyfit():
         y = -12.0 + 0.3 * x + rng.normal(0.0, 0.4, n)
         m, y0 = np.polyfit(x, y, 1)
         np.testing.assert_allclose(fit_line(x, y), (y0, m), rtol=1e-12, atol=1e-12)
+
+
+def test_offset_at_stripe_is_where_the_stripe_crosses_the_weld():
+    """The reported offset (docs/contracts.md) is y_r of the weld line at the stripe: on a rig
+    whose stripe runs straight across it is the filter's e moved to the stripe's x_r; on a
+    rolled rig the point lies on both the stripe's wall line and the weld line."""
+    from cslx.runtime.line_filter import offset_at_stripe
+
+    x_ref = 150.0
+    straight = (-1 / 60, 0.0, 2.5)  # x_r = 150 for every y_r
+    rolled = (-1 / 60, 0.45 / 60, 2.5)  # the stripe leans: x_r grows with y_r
+    for e, t in ((0.0, 0.0), (3.0, math.tan(math.radians(3.5))), (-4.0, -0.1)):
+        assert offset_at_stripe(e, t, x_ref, straight) == pytest.approx(e, abs=1e-12)
+        y = offset_at_stripe(e, t, x_ref, rolled)
+        a, b, c = rolled
+        x = (-c - b * y) / a  # the stripe's point at y_r = y ...
+        assert y == pytest.approx(e + t * (x - x_ref), abs=1e-9)  # ... is on the weld line
+        if t:
+            assert abs(y - e) > 0.01  # and not the offset at x_ref
