@@ -153,18 +153,8 @@ def replay(run: dict, kalman, keep=lambda raw, points: True) -> tuple[float, int
     from cslx.runtime.junction_track import JunctionTrack
 
     c, x_ref = kalman, run["x_ref"]
-    track = JunctionTrack(
-        c.junction_window,
-        c.junction_tol_mm,
-        c.junction_hold,
-        c.junction_unseen_mm,
-        hold_min_support=c.junction_hold_min_support,
-        x_min_mm=x_ref,
-        crossing_zone=tuple(x_ref + z for z in c.junction_crossing_zone_mm),
-        keep_clear=c.junction_keep_clear,
-        fuse=c.junction_fuse,
-        confirm_min=c.junction_confirm_min,
-    )
+    # as recorded before the bar's line (`bar_slope`): this replay passes no stripe line
+    track = JunctionTrack.from_config(c, x_ref, bar_slope=False)
     out = []
     for i, fr in enumerate(run["frames"]):
         if i:

@@ -100,22 +100,10 @@ def sightings(run: dict, config) -> list:
 def replay(run: dict, sights: list, kalman, x_ref: float, bar_min_points: int = 10) -> np.ndarray:
     """`JunctionTrack` over the recorded frames as `Tracker._junction` drives it."""
     from cslx.runtime.junction_track import JunctionTrack, cut_by_view
+    from cslx.runtime.line_filter import fit_line
 
     c = kalman
-    track = JunctionTrack(
-        c.junction_window,
-        c.junction_tol_mm,
-        c.junction_hold,
-        c.junction_unseen_mm,
-        hold_min_support=c.junction_hold_min_support,
-        x_min_mm=x_ref,
-        crossing_zone=tuple(x_ref + z for z in c.junction_crossing_zone_mm),
-        keep_clear=c.junction_keep_clear,
-        fuse=c.junction_fuse,
-        confirm_min=c.junction_confirm_min,
-        bar_slope=c.junction_bar_slope,
-        bar_min_points=bar_min_points,
-    )
+    track = JunctionTrack.from_config(c, x_ref, bar_min_points=bar_min_points)
     rep = []
     for i, (fr, s) in enumerate(zip(run["frames"], sights, strict=True)):
         if i:
@@ -134,8 +122,7 @@ def replay(run: dict, sights: list, kalman, x_ref: float, bar_min_points: int = 
         line = None
         xy = pv[np.all(np.isfinite(pv[:, :2]), 1), :2]
         if c.junction_bar_slope and len(xy) >= 10 and np.ptp(xy[:, 0]) > 0:
-            m, y0 = np.polyfit(xy[:, 0], xy[:, 1], 1)
-            line = (float(y0), float(m))
+            line = fit_line(xy[:, 0], xy[:, 1])  # as `Tracker._junction`
         y = float(np.median(ys)) if ys.size else None
         rep.append(track.update(i, x, extent, y, line))
     return np.array(rep)

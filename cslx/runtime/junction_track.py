@@ -119,6 +119,24 @@ class JunctionTrack:
         self.stripe_line = (0.0, 0.0)  # the stripe on the wall, y_r = y0 + m x_r
         self.reset()
 
+    @classmethod
+    def from_config(cls, c, x_ref: float, **overrides) -> JunctionTrack:
+        """The tracker's track (`Tracker.reset`): the junction settings of `KalmanConfig` ``c``
+        about the stripe's x_ref; keyword arguments replace them (the replays in
+        `experiments.junction_errors` and `experiments.junction_ramp`)."""
+        kw = dict(
+            hold_min_support=c.junction_hold_min_support,
+            x_min_mm=x_ref,
+            crossing_zone=tuple(x_ref + z for z in c.junction_crossing_zone_mm),
+            keep_clear=c.junction_keep_clear,
+            fuse=c.junction_fuse,
+            confirm_min=c.junction_confirm_min,
+            bar_slope=c.junction_bar_slope,
+        )
+        kw.update(overrides)
+        window, hold = c.junction_window, c.junction_hold
+        return cls(window, c.junction_tol_mm, hold, c.junction_unseen_mm, **kw)
+
     def reset(self) -> None:
         self.sightings: list[tuple[int, float]] = []  # (frame, x moved to now)
         self.support: list[tuple[int, float]] = []  # the held junction's sightings

@@ -400,20 +400,7 @@ class Tracker:
         self.frame = 0
         self._t = 0.0
         self._confidence = 0.0
-        c = self.kalman
-        self._junctions = JunctionTrack(
-            c.junction_window,
-            c.junction_tol_mm,
-            c.junction_hold,
-            c.junction_unseen_mm,
-            hold_min_support=c.junction_hold_min_support,
-            x_min_mm=self.x_ref,
-            crossing_zone=tuple(self.x_ref + z for z in c.junction_crossing_zone_mm),
-            keep_clear=c.junction_keep_clear,
-            fuse=c.junction_fuse,
-            confirm_min=c.junction_confirm_min,
-            bar_slope=c.junction_bar_slope,
-        )
+        self._junctions = JunctionTrack.from_config(self.kalman, self.x_ref)
         self._widths: collections.deque[float] = collections.deque(maxlen=self.kalman.width_memory)
         self._odd_widths = 0
         self._path = PathHeading(self.kalman, self.x_ref)  # the recent accepted bead centres
