@@ -326,8 +326,9 @@ def _run_collected(args, log) -> int:
         tracker = _compile(sensor, log)
         gc.freeze()
         gc.enable()
-        # the turn at a T ends on the offset observed at the tracker's x_ref (`lookahead_mm`)
-        ctrl = PathController(ControllerConfig(lookahead_mm=tracker.x_ref))
+        # the turn at a T ends on the offset observed where the stripe crosses the robot's
+        # axis (`Tracker.lookahead_mm`: x_ref on a rig whose stripe runs straight across)
+        ctrl = PathController(ControllerConfig(lookahead_mm=tracker.lookahead_mm))
         return _loop(args, source, tracker, link, ctrl, TrackingLoop, TrackLog)
     finally:
         source.close()

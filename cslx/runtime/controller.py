@@ -130,7 +130,7 @@ class ControllerConfig:
     junction_min_confidence: float = 0.3
     junction_gate_mm: float = 15.0  # a later sighting farther than this from x_j is ignored
     blind_stop_s: float = 0.5  # s without a confident observation → stop
-    lookahead_mm: float = RIG.lookahead_mm  # x_r of the observed offset (the tracker's x_ref)
+    lookahead_mm: float = RIG.lookahead_mm  # x_r of the observed offset (`Tracker.lookahead_mm`)
     # the end of the TURN may move by up to this much to land the look-ahead point on the
     # crossing weld as observed (`PathController._finish_on_weld`); 0: odometry alone.
     # Figure 22 (`experiments/fig22_tracking.py` defaults), dev seeds 2201 / 2203 / 2204,
@@ -463,9 +463,10 @@ class PathController:
 
     def _finish_on_weld(self, offset_mm: float, heading_deg: float, remaining: float) -> float:
         """The rest of the turn from the crossing weld's observed offset e (module docstring,
-        TURN): an in-place rotation δ (CCW +) moves the weld's offset at the look-ahead x_ref
-        by −x_ref·δ (the tracker's prediction, e' = e − x_ref δ), so the look-ahead point lands
-        on the weld after a further rotation `turn_direction` · atan(e / x_ref). It replaces
+        TURN): an in-place rotation δ (CCW +) moves the weld's offset at the look-ahead L
+        (`lookahead_mm`, where the stripe crosses the robot's axis) by −L·δ (the tracker's
+        prediction, e' = e − x_ref δ, with L = x_ref on the default rig), so the look-ahead
+        point lands on the weld after a further rotation `turn_direction` · atan(e / L). It replaces
         the odometric remainder when the two agree within `turn_finish_deg` (the observation
         is of the new weld, not the old one's prediction ≈ 90° off) and the weld is seen
         about square (|θ| ≤ `square_deg`, or its heading unknown). Returns the remaining angle."""

@@ -493,6 +493,17 @@ def offset_at_stripe(e: float, tan_theta: float, x_ref: float, wall) -> float:
     return float(e + tan_theta * (x - x_ref))
 
 
+def stripe_x_on_axis(wall, default: float) -> float:
+    """x_r where the horizontal stripe crosses the robot's axis (y_r = 0) on the wall: the
+    line ``wall`` = (a, b, c) of `offset_at_stripe` at y_r = 0, x_r = −c / a; ``default``
+    where the stripe runs along the axis (a = 0). The controller's look-ahead
+    (`ControllerConfig.lookahead_mm`): the lever of a rotation on the offset the tracker
+    reports. On the default rig it is x_ref (150 mm); with the projector rolled 8 / 15 / 25°
+    155.3 / 159.9 / 167.0 mm against x_ref 150 (`experiments/tracking_generality.py`'s rigs)."""
+    a, _, c = wall
+    return float(-c / a) if abs(a) > 1e-12 else float(default)
+
+
 def fit_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """(y0, m) of the least-squares line y = y0 + m x: `np.polyfit(x, y, 1)` in closed form
     (the normal equations about the means; within 1e-12 of it, ≈ 10 µs against ≈ 60 µs)."""

@@ -116,7 +116,14 @@ import numpy as np
 from ..config import MOTION
 from .bead_near import near_for, refit_near
 from .junction_track import JunctionTrack, cut_by_view
-from .line_filter import KalmanConfig, WeldLineFilter, fit_line, offset_at_stripe, width_weight
+from .line_filter import (
+    KalmanConfig,
+    WeldLineFilter,
+    fit_line,
+    offset_at_stripe,
+    stripe_x_on_axis,
+    width_weight,
+)
 from .path_heading import PathHeading
 from .step_program import step_program
 from .stripe_colour import choose_weights
@@ -261,7 +268,9 @@ class Tracker:
 
     Build it with `from_calibration`; call `step(frame)` per frame (module docstring).
     Attributes: sensor, config (`cslx.runtime.pipeline.PipelineConfig`), kalman (`KalmanConfig`),
-    compile_s (start-up compile time, s), frame (frames stepped so far).
+    compile_s (start-up compile time, s), frame (frames stepped so far), x_ref (the weld
+    line's reference abscissa, mm), lookahead_mm (where the stripe crosses the robot's axis:
+    the controller's `ControllerConfig.lookahead_mm`).
     """
 
     def __init__(
@@ -296,6 +305,7 @@ class Tracker:
         width, height = self.sensor.camera.image_size
         self.image_shape = (int(height), int(width), 3)
         self.x_ref = float(np.asarray(self._stripe_x(), float))
+        self.lookahead_mm = stripe_x_on_axis(self._wall, self.x_ref)
         self._roi, self.stripe_width_px = roi, (NAN, NAN)
         self.auto_sigma, self.auto_weights = bool(auto_sigma), bool(auto_weights)
         self._programs: dict[tuple, Any] = {}  # the compiled step per (Steger σ, weights)

@@ -103,6 +103,7 @@ def run_closed_loop(
     settle_s: float = SETTLE_S,
     after_turn_frames: int | None = None,
     tracker=None,
+    sensor=None,
     progress: bool = False,
     log=None,
 ) -> dict:
@@ -123,7 +124,9 @@ def run_closed_loop(
             left out there).
         after_turn_frames: end the run this many frames after the turn was completed
             (None: run all `n_frames`).
-        tracker: a `Tracker` for the default rig to reuse (compiled once), else built here.
+        tracker: a `Tracker` for ``sensor`` to reuse (compiled once), else built here.
+        sensor: the rig that renders the frames (`cslx.sensor.Sensor`; default
+            `cslx.sensor.default_sensor`), e.g. a rolled projector's.
 
     Returns:
         dict with `rows` (per-frame dicts), `welds` (bead sizes), and the summary numbers:
@@ -138,12 +141,15 @@ def run_closed_loop(
     from .robot import RobotSimulator, SimulatorConfig
     from .scene import RobotPose
 
-    sensor = default_sensor()
+    sensor = default_sensor() if sensor is None else sensor
     world, sizes = _world(seed)
     if tracker is None:
         tracker = Tracker.from_calibration(sensor, log=log or (lambda s: None))
     tracker.reset()
-    controller = PathController(ControllerConfig(turn_rate=turn_rate, lookahead_mm=tracker.x_ref))
+    # the offset is observed where the stripe crosses the weld: its lever is the stripe's
+    # x_r on the robot's axis (`Tracker.lookahead_mm`; x_ref on the default rig)
+    config = ControllerConfig(turn_rate=turn_rate, lookahead_mm=tracker.lookahead_mm)
+    controller = PathController(config)
     start = (-start_before_mm, start_offset_mm, math.radians(start_heading_deg))
     cfg = SimulatorConfig(realtime=False, command_timeout_s=1e6, seed=seed)
     dt = 1.0 / fps

@@ -261,3 +261,31 @@ def test_offset_at_stripe_is_where_the_stripe_crosses_the_weld():
         assert y == pytest.approx(e + t * (x - x_ref), abs=1e-9)  # ... is on the weld line
         if t:
             assert abs(y - e) > 0.01  # and not the offset at x_ref
+
+
+def test_lookahead_is_the_lever_of_a_rotation_on_the_reported_offset():
+    """`stripe_x_on_axis` is the controller's look-ahead: turning the robot in place by δ
+    moves the offset reported at the stripe (`offset_at_stripe`) of a weld through the
+    reference point by −L·δ to first order, L the stripe's x_r on the robot's axis. On a
+    projector rolled 25° (the rig of experiments/tracking_generality.py) L is 17 mm beyond
+    x_ref, the point where the optical axis meets plane 0."""
+    from cslx.runtime.line_filter import offset_at_stripe, stripe_x_on_axis
+    from experiments.tracking_generality import rig_sensor
+
+    for roll in (0.0, 25.0):
+        s = rig_sensor(roll_deg=roll)
+        n = np.asarray(s.planes, float)[s.plane_index(0)]
+        R, T = np.asarray(s.R_cr, float), np.asarray(s.T_cr, float)
+        n_r = R @ n
+        wall = (n_r[0], n_r[1], 1.0 - n_r @ T)
+        x_ref = float(R[0] @ np.array([0.0, 0.0, -1.0 / n[2]]) + T[0])
+        L = stripe_x_on_axis(wall, x_ref)
+        X_c = R.T @ (np.array([L, 0.0, 0.0]) - T)  # the wall point (L, 0, 0) lies on plane 0
+        assert n @ X_c + 1.0 == pytest.approx(0.0, abs=1e-9)
+        d = 1e-6  # the weld y_r = 0 seen after a turn by δ: y_r = −tan δ · x_r
+        y = offset_at_stripe(-math.tan(d) * x_ref, -math.tan(d), x_ref, wall)
+        assert y / d == pytest.approx(-L, rel=1e-5)
+        if roll == 0.0:
+            assert L == pytest.approx(x_ref, abs=1e-3)
+        else:
+            assert L - x_ref > 15.0
