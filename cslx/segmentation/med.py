@@ -450,7 +450,9 @@ def _centro_output(M, X, axis):
     largest value 144, filters identical. The whole tracking frame (`experiments.ab_tracking
     --rev main`, 300 frames, load 7–11): paired +0.015, −0.080, −0.016 ms, inside the
     load's quartiles (±0.7–3 ms). Its centres moved ≤ 3.1e-5 px (video seed 0, 48 frames);
-    one ill-posed frame's bead centre (the cap fit) 0.18 mm (widths ≤ 1e-4 mm).
+    one ill-posed frame's bead centre (the cap fit) 0.18 mm (widths ≤ 1e-4 mm). Not kept:
+    u and w as one stacked array (one fusion instead of two; paired +0.013 / −0.021 ms on
+    the two bands, 400 calls, load 9–10: noise).
     """
     hi = jax.lax.Precision.HIGHEST  # no TF32 on GPUs
     m = M.shape[0]
