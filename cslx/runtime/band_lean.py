@@ -1,0 +1,132 @@
+"""Tracking bands that follow a leaning stripe (issues 12 / 13).
+
+The pipeline's tracking mode (`cslx.runtime.pipeline`) processes a band of ``2·roi_half_h``
+rows around the horizontal stripe (all columns) and of ``2·roi_half_w`` columns around the
+vertical one. A straight band holds a stripe that leans by less than the band less its two
+margins (64 − 2·8 rows over the 640 columns, ≈ 4°). With the cross projector rolled about
+the camera axis the stripes lean: 7.5 / 13.9 / 22.9° for the horizontal one at a roll of
+8 / 15 / 25° (`experiments.tracking_generality`, ``proj_roll_*``), and every frame ran the
+full frame. Here a band that does not fit straight follows the stripe's line instead: the
+band of rows starts, in column u, at s(u) = s₀ + b·u (a float; clamped to the frame), a
+straight line fitted to the frame's centres (`stripe_line`); likewise the band of columns
+in row v. The cut interpolates between whole rows (`cslx.runtime.band_input.sheared_band`),
+so the stripe runs straight along the band and Steger's smoothing along it sees no
+staircase; the centres are shifted back to frame coordinates by s(u).
+
+A band that fits straight stays straight (``lean`` (0, 0) in the state, the cut and the
+program's values as before), so a rig whose stripes do not lean tracks bit for bit as it
+did. The state holds ``lean_h`` / ``lean_v`` = (s₀, b); b = 0 means the straight band at
+``row0`` / ``col0``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jax import lax
+
+from .small_ops import masked_median
+
+__all__ = ["band_cut", "lean_allowed", "lean_starts", "next_bands", "stripe_line"]
+
+
+def lean_allowed(config) -> bool:
+    """Whether the bands may follow a leaning stripe: ``roi_lean``, and no domed fill that
+    looks at neighbouring columns (``clip_dome_along``: a sheared cut moves them)."""
+    along = config.fill_clipped and config.clip_dome > 0 and config.clip_dome_along > 0
+    return bool(config.roi_lean) and not along
+
+
+def lean_starts(lean, n_along: int, n_across: int, size: int):
+    """The sheared band's float start per column (row): s₀ + b·u, within [0, n − size − 1]."""
+    u = jnp.arange(n_along, dtype=lean.dtype)
+    return jnp.clip(lean[0] + lean[1] * u, 0.0, float(n_across - size - 1))
+
+
+def band_cut(cut, axis: int, start, lean, size: int, shape, allowed: bool):
+    """(band, offset): the straight band at ``start`` when ``lean``'s slope is 0 (or
+    ``allowed`` is False), else the sheared one; ``offset`` (scalar or per column / row)
+    takes band centres to frame coordinates."""
+    if not allowed:
+        return cut(axis, start, size), start
+    n_across, n_along = shape if axis == 0 else shape[::-1]
+    starts = lean_starts(lean, n_along, n_across, size)
+    band = lax.cond(lean[1] == 0, lambda: cut(axis, start, size), lambda: cut(axis, starts, size))
+    offset = jnp.where(lean[1] == 0, start.astype(starts.dtype), starts)
+    return band, offset
+
+
+def stripe_line(pos, valid, half: float):
+    """(a, b): the line pos ≈ a + b·u through a stripe's valid centres.
+
+    Least squares, then once more over the centres within ``half`` px of that line (a few
+    stray centres, the other stripe or a glint, move the first fit). NaN when fewer than
+    two centres.
+    """
+    u = jnp.arange(pos.shape[0], dtype=pos.dtype)
+
+    def fit(w):
+        w = w.astype(pos.dtype)
+        n = jnp.sum(w)
+        um = jnp.sum(w * u) / n
+        y = jnp.where(w > 0, pos, 0.0)
+        ym = jnp.sum(w * y) / n
+        b = jnp.sum(w * (u - um) * (y - ym)) / jnp.sum(w * (u - um) ** 2)
+        return ym - b * um, b
+
+    a, b = fit(valid)
+    near = valid & (jnp.abs(pos - (a + b * u)) <= half)
+    return fit(near)
+
+
+def _inside(pos, valid, lo, hi, min_share: float = 0.98):
+    return jnp.sum(valid & (pos >= lo) & (pos <= hi)) >= min_share * jnp.sum(valid)
+
+
+def next_bands(ch, cv, state, config, shape):
+    """Centre the bands on this frame's stripes; track only when both fit inside them.
+
+    The straight band (as before): its centre is the median of the valid centres, as
+    `masked_median` (bisection on the float keys, equal to `jnp.nanmedian` bit for bit: the
+    two sorts of 640 and 480 values cost 0.34 ms of a tracking frame, issue 13; load 6–7).
+    Nearly all centres (98 %) must lie inside the new band, away from its edges by
+    ``roi_margin`` (a stripe at the image border may touch the band's edge there); stray
+    false centres may not. A stripe that does not fit straight gets a sheared band along
+    its fitted line (`stripe_line`; module notes) when it fits that one by the same rule.
+    """
+    height, width = shape
+    hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
+    allowed = lean_allowed(config)
+
+    def band(c, half, size, n):
+        centre = masked_median(c.pos, c.valid)
+        start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
+        lo = jnp.where(start == 0, -jnp.inf, start + m)
+        hi = jnp.where(start == size - 2 * half, jnp.inf, start + 2 * half - 1 - m)
+        fits = _inside(c.pos, c.valid, lo, hi)
+        enough = jnp.sum(c.valid) >= config.min_valid_fraction * n
+        zero = jnp.zeros(2, c.pos.dtype)
+        if not allowed:
+            return start, fits & enough & jnp.isfinite(centre), zero
+        a, b = stripe_line(c.pos, c.valid, half - m)
+        lean = jnp.stack([a - half, b]).astype(c.pos.dtype)
+        s = lean_starts(lean, n, size, 2 * half)
+        top = float(size - 2 * half - 1)
+        lo = jnp.where(s <= 0, -jnp.inf, s + m)
+        hi = jnp.where(s >= top, jnp.inf, s + 2 * half - 1 - m)
+        leans = ~fits & jnp.isfinite(a) & jnp.isfinite(b) & (b != 0)
+        leans = leans & _inside(c.pos, c.valid, lo, hi)
+        ok = (fits | leans) & enough & jnp.isfinite(centre)
+        return start, ok, jnp.where(leans, lean, zero)
+
+    row0, ok_h, lean_h = band(ch, hh, height, width)
+    col0, ok_v, lean_v = band(cv, hw, width, height)
+    tracking = ok_h & ok_v
+    row0, col0 = jnp.where(ok_h, row0, state.row0), jnp.where(ok_v, col0, state.col0)
+    # a frame without tracking takes straight bands from the first pass (`_first_pass`)
+    lean_h, lean_v = (jnp.where(tracking, x, jnp.zeros_like(x)) for x in (lean_h, lean_v))
+    return eqx.tree_at(
+        lambda s: (s.row0, s.col0, s.tracking, s.lean_h, s.lean_v),
+        state,
+        (row0, col0, tracking, lean_h, lean_v),
+    )
