@@ -21,15 +21,15 @@ runs). The MED filters of the bands are shorter (``L_roi``, a band is a short se
 kept apart from the full-frame filters. A stripe that leaves its band, or too few centres,
 switches the next frame back to a frame without tracking state. A stripe that leans more
 than its straight band holds (a rolled projector) gets a band sheared along its fitted line
-(`cslx.runtime.band_lean`; the rows interpolated, the centres shifted back per column). Such a frame (the first one
-too) takes its bands from a cheap first pass (the brightest sample of every column / row,
-`_first_pass`) and runs MED from the band filters to convergence there; only when the
-stripes do not fit the bands does it run MED on the full frame. Centres outside the band are
-reported as not found; inside it they agree with full-frame processing
-(tests/runtime/test_pipeline.py). The bands are cut out of the uint8 RGB frame before the
-colour sum and the clipped-core fill (``band_first``, `cslx.runtime.band_input`; the same
-values as the bands of the converted frame), so a tracking frame never converts the whole
-frame.
+(`cslx.runtime.band_lean`; the rows interpolated, the centres shifted back per column).
+Such a frame (the first one too) takes its bands from a cheap first pass (the brightest
+sample of every column / row, `_first_pass`) and runs MED from the band filters to
+convergence there; only when the stripes do not fit the bands does it run MED on the full
+frame. Centres outside the band are reported as not found; inside it they agree with
+full-frame processing (tests/runtime/test_pipeline.py). The bands are cut out of the uint8
+RGB frame before the colour sum and the clipped-core fill (``band_first``,
+`cslx.runtime.band_input`; the same values as the bands of the converted frame), so a
+tracking frame never converts the whole frame.
 
 Everything is pure JAX on one frame and jit-compiled at `process_frame`;
 `cslx.runtime.batch.process_batch` runs it over a stack of frames (under vmap `lax.cond`
