@@ -54,8 +54,12 @@ mean / max mm, heading mean °, frames in the bands): base identical per frame; 
 96.9 %; 15° 0.103 / 0.34, 0.136 → 0.105 / 0.33, 0.128 and 0.107 / 0.36, 0.133 → 0.113 /
 0.36, 0.156, both 96.9 %; 25° 0.139 / 0.52, 0.178 → 0.143 / 0.52, 0.259, 90.6 % and 0.232
 / 0.56, 0.231 → 0.232 / 0.54, 0.298, 96.9 %; T recall and false T unchanged in every run.
-Open: the heading at 25° is 0.02–0.08° worse in all three runs (not diagnosed; within the
-0.5° goal).
+With 95 % (one process, 98 → 95 %): 25° 7800 0.143 / 0.52, 0.259°, 90.6 % → 0.150 / 0.58,
+0.292°, 96.9 %; 7801 identical (96.9 % either way). Open: at 25° the bands cost heading,
+0.02–0.11° over the full frame in all three runs (7400 0.217 → 0.236, 7800 0.178 → 0.292,
+7801 0.231 → 0.298; within the 0.5° goal), and 7800's offset max 0.52 → 0.58 mm; not
+diagnosed (candidates: the crossing and the frame's ends above, where band and full frame
+differ).
 """
 
 from __future__ import annotations
