@@ -89,6 +89,7 @@ __all__ = [
     "frame_stats",
     "image_cutter",
     "rgb_cutter",
+    "sheared_band",
     "STATS_STRIDE",
 ]
 
@@ -230,6 +231,68 @@ def band_image(
     return out.T if axis == 1 else out
 
 
+def _lerp_rows(x, frac, ctx: int, size: int):
+    """Rows ``ctx .. ctx + size`` of ``x`` moved down by ``frac`` (per column) of a row:
+    (1 − f) x[ctx + r] + f x[ctx + r + 1], linear interpolation (`sheared_band`)."""
+    frac = frac.astype(x.dtype)
+    return (1 - frac) * x[ctx : ctx + size] + frac * x[ctx + 1 : ctx + size + 1]
+
+
+def sheared_band(
+    rgb: UInt8[Array, "h w 3"],
+    start: Float[Array, " n"],
+    size: int,
+    axis: int,
+    weights,
+    dtype,
+    fill: bool = True,
+    dome: tuple = (),
+) -> Float[Array, "a b"]:
+    """A band that follows a leaning stripe: `band_image` with a start per column (row).
+
+    axis 0: for every column u the ``size`` rows from ``start[u]`` (a float row, within
+    [0, H − size − 1]); axis 1: for every row v the ``size`` columns from ``start[v]``.
+    Band sample r of column u is the frame's monochrome input (colour sum, clipped runs
+    filled down the column) at row ``start[u] + r``, linearly interpolated between the rows
+    ⌊start[u]⌋ + r and ⌊start[u]⌋ + r + 1 (issue 13: a shear by whole rows would make the
+    leaning stripe a staircase in the band, and Steger's smoothing along it would move the
+    centres by up to ½ px towards the neighbouring columns; interpolated, the stripe runs
+    straight along the band). At a whole-row start the band is the frame's input exactly.
+
+    Each column's rows are gathered with ``MAX_RUN + 1`` rows of context on both sides,
+    indices clamped at the frame's border (the border row repeated). The fill works down
+    each column alone (the tracker's dome has no ``along`` test), so as in `band_image` the
+    context holds every clipped run reaching into the band with its flanks; a run touching
+    the frame's border still touches the cut's edge after the repeated rows, and is left
+    unfilled in both (tests/runtime/test_band_input.py).
+    """
+    n = rgb.shape[axis]
+    ctx = MAX_RUN + 1 if fill else 0
+    outer = size + 1 + 2 * ctx
+    first = jnp.floor(start)
+    frac = start - first
+    rows = (
+        first.astype(jnp.int32)[None, :] + jnp.arange(-ctx, outer - ctx, dtype=jnp.int32)[:, None]
+    )
+    rows = jnp.clip(rows, 0, n - 1)  # (outer, N)
+    if axis == 0:
+        sub = jnp.take_along_axis(rgb, rows[:, :, None], axis=0)  # (outer, W, 3)
+        I, clip = colour_sum(sub, weights, dtype), clipped_mask(sub)
+    else:
+        sub = jnp.take_along_axis(rgb, rows.T[:, :, None], axis=1)  # (H, outer, 3)
+        I, clip = colour_sum(sub, weights, dtype).T, clipped_mask(sub).T
+        sub = jnp.transpose(sub, (1, 0, 2))
+        dome = (dome[1], dome[0], *dome[2:]) if dome else dome
+    if fill:  # the fill's scans stop at the band's far edge (``margin``, as in `band_image`)
+        I = lax.cond(
+            jnp.any(clip),
+            lambda: _fill(sub, I, clip, weights, 0, dome, ctx),
+            lambda: I[ctx : ctx + size + 1],
+        )
+    out = _lerp_rows(I, frac, 0, size)
+    return out.T if axis == 1 else out
+
+
 def _sub_band(x, offset, size: int, axis: int):
     """``size`` samples of ``x`` from ``offset`` along ``axis`` (all of ``x`` when it fits)."""
     if x.shape[axis] == size:
@@ -267,11 +330,19 @@ def frame_input(
 
 
 def image_cutter(I):
-    """``cut(axis, start, size)``: a band of converted whole-frame input (`frame_input`)."""
+    """``cut(axis, start, size)``: a band of converted whole-frame input (`frame_input`);
+    a float vector ``start`` (one per column / row) cuts a sheared band (`sheared_band`)."""
     I_h, I_v = I if isinstance(I, tuple) else (I, I)
     zero = jnp.zeros((), jnp.int32)
 
     def cut(axis, start, size):
+        if jnp.ndim(start) == 1:
+            x = I_h if axis == 0 else I_v.T
+            first = jnp.floor(start)
+            rows = first.astype(jnp.int32)[None, :] + jnp.arange(size + 1, dtype=jnp.int32)[:, None]
+            sub = jnp.take_along_axis(x, jnp.clip(rows, 0, x.shape[0] - 1), axis=0)
+            out = _lerp_rows(sub, start - first, 0, size)
+            return out.T if axis == 1 else out
         if axis == 0:
             return lax.dynamic_slice(I_h, (start, zero), (size, I_h.shape[1]))
         return lax.dynamic_slice(I_v, (zero, start), (I_v.shape[0], size))
@@ -286,10 +357,13 @@ def rgb_cutter(
     fill: bool = True,
     dome: tuple = (),
 ):
-    """``cut(axis, start, size)``: a band cut from the RGB frame and converted (`band_image`);
-    the same values as ``image_cutter(frame_input(rgb, ...))``."""
+    """``cut(axis, start, size)``: a band cut from the RGB frame and converted (`band_image`,
+    or `sheared_band` for a float vector ``start``); the same values as
+    ``image_cutter(frame_input(rgb, ...))``."""
 
     def cut(axis, start, size):
+        if jnp.ndim(start) == 1:
+            return sheared_band(rgb, start, size, axis, weights, dtype, fill, dome)
         return band_image(rgb, start, size, axis, weights, dtype, fill, dome)
 
     return cut

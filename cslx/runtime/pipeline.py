@@ -19,15 +19,17 @@ their offsets dynamic (`lax.dynamic_slice`), so one compiled program serves ever
 `lax.cond` picks the band branch or the full-frame branch (on the CPU only the chosen branch
 runs). The MED filters of the bands are shorter (``L_roi``, a band is a short segment) and
 kept apart from the full-frame filters. A stripe that leaves its band, or too few centres,
-switches the next frame back to a frame without tracking state. Such a frame (the first one
-too) takes its bands from a cheap first pass (the brightest sample of every column / row,
-`_first_pass`) and runs MED from the band filters to convergence there; only when the
-stripes do not fit the bands does it run MED on the full frame. Centres outside the band are
-reported as not found; inside it they agree with full-frame processing
-(tests/runtime/test_pipeline.py). The bands are cut out of the uint8 RGB frame before the
-colour sum and the clipped-core fill (``band_first``, `cslx.runtime.band_input`; the same
-values as the bands of the converted frame), so a tracking frame never converts the whole
-frame.
+switches the next frame back to a frame without tracking state. A stripe that leans more
+than its straight band holds (a rolled projector) gets a band sheared along its fitted line
+(`cslx.runtime.band_lean`; the rows interpolated, the centres shifted back per column).
+Such a frame (the first one too) takes its bands from a cheap first pass (the brightest
+sample of every column / row, `_first_pass`) and runs MED from the band filters to
+convergence there; only when the stripes do not fit the bands does it run MED on the full
+frame. Centres outside the band are reported as not found; inside it they agree with
+full-frame processing (tests/runtime/test_pipeline.py). The bands are cut out of the uint8
+RGB frame before the colour sum and the clipped-core fill (``band_first``,
+`cslx.runtime.band_input`; the same values as the bands of the converted frame), so a
+tracking frame never converts the whole frame.
 
 Everything is pure JAX on one frame and jit-compiled at `process_frame`;
 `cslx.runtime.batch.process_batch` runs it over a stack of frames (under vmap `lax.cond`
@@ -53,8 +55,9 @@ from ..segmentation.med_bands import band_snr_scale
 from ..segmentation.steger import Centres, steger_centres
 from ..sensor import Sensor, triangulate
 from .band_input import band_image, colour_sum, frame_input, frame_stats, image_cutter, rgb_cutter
+from .band_lean import band_cut, lean_allowed, next_bands
 from .pipeline_config import PipelineConfig
-from .small_ops import masked_median, window_nanmedian
+from .small_ops import window_nanmedian
 from .weld import WeldFeature, weld_features
 
 __all__ = [
@@ -76,8 +79,9 @@ class PipelineState(eqx.Module):
 
     filter_h / filter_v: full-frame filters (L_h,), (L_v,); roi_filter_h / roi_filter_v:
     band filters (L_roi,). row0: first row of the horizontal stripe's band; col0: first
-    column of the vertical stripe's band; tracking: process the bands (True) or the full
-    frame (False) next.
+    column of the vertical stripe's band; lean_h / lean_v: (s₀, b) of a band that follows a
+    leaning stripe, (0, 0) for the straight band at row0 / col0 (`cslx.runtime.band_lean`);
+    tracking: process the bands (True) or the full frame (False) next.
     """
 
     filter_h: Float[Array, " Lh"]
@@ -87,6 +91,8 @@ class PipelineState(eqx.Module):
     row0: Int[Array, ""]
     col0: Int[Array, ""]
     tracking: Bool[Array, ""]
+    lean_h: Float[Array, " 2"]
+    lean_v: Float[Array, " 2"]
 
 
 class FrameResult(NamedTuple):
@@ -138,6 +144,8 @@ def init_state(
         row0=jnp.zeros((), jnp.int32),
         col0=jnp.zeros((), jnp.int32),
         tracking=jnp.zeros((), bool),
+        lean_h=jnp.zeros(2, dtype),
+        lean_v=jnp.zeros(2, dtype),
     )
 
 
@@ -217,8 +225,9 @@ def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=N
     lag = config.roi_med_lag and max_steps is None
     max_steps = config.roi_max_steps if max_steps is None else max_steps
     height, width = shape
-    band_h = cut(0, state.row0, 2 * config.roi_half_h)
-    band_v = cut(1, state.col0, 2 * config.roi_half_w)
+    lean = lean_allowed(config)  # a sheared band along a leaning stripe (`band_lean`)
+    band_h, off_h = band_cut(cut, 0, state.row0, state.lean_h, 2 * config.roi_half_h, shape, lean)
+    band_v, off_v = band_cut(cut, 1, state.col0, state.lean_v, 2 * config.roi_half_w, shape, lean)
     med_on, sym = config.use_med and config.roi_med, config.roi_symmetric
     L = config.L_roi
     ch, Wh, sh, kh = _stripe(
@@ -229,8 +238,8 @@ def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=N
     )
     new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
     return (
-        _shift(ch, state.row0),
-        _shift(cv, state.col0),
+        _shift(ch, off_h),
+        _shift(cv, off_v),
         jnp.stack([sh, sv]),
         jnp.stack([kh, kv]),
         new,
@@ -244,7 +253,7 @@ def _first_pass(cols, rows, shape, state: PipelineState, config: PipelineConfig)
     The brightest sample of every column of ``cols`` (row of ``rows``: the monochrome
     image, or every k-th column / row of it) is a rough stripe position; the bands are
     centred on their medians. They are used when nearly all of those positions fall inside
-    (the `_next_bands` rule: 98 %, away from the band edges); stray maxima (the other
+    (the `band_lean.next_bands` rule: 98 %, away from the band edges); stray maxima (the other
     stripe, a glint) are the few columns left out. Otherwise the frame goes through
     full-frame MED.
     """
@@ -294,39 +303,6 @@ def _cold_rgb(rgb, state: PipelineState, config: PipelineConfig, dtype):
     banded, fits = _first_pass(cols, rows, shape, state, config)
     cut = rgb_cutter(rgb, config.weights, dtype, config.fill_clipped, dome)
     return lax.cond(fits, lambda: _bands(cut, shape, banded, config, config.max_steps), full)
-
-
-def _next_bands(ch: Centres, cv: Centres, state, config: PipelineConfig, shape):
-    """Centre the bands on this frame's stripes; track only when both fit inside them.
-
-    The band centre is the median of the valid centres, as `masked_median` (bisection on the
-    float keys, equal to `jnp.nanmedian` bit for bit): the two sorts of 640 and 480 values
-    cost 0.34 ms of a tracking frame (issue 13; load 6–7).
-    """
-    height, width = shape
-    hh, hw, m = config.roi_half_h, config.roi_half_w, config.roi_margin
-
-    def band(c: Centres, half, size, n):
-        centre = masked_median(c.pos, c.valid)
-        start = jnp.clip(jnp.round(centre).astype(jnp.int32) - half, 0, size - 2 * half)
-        # Nearly all centres must lie inside the new band, away from its edges (a stripe
-        # at the image border may touch the band's edge there); stray false centres may not.
-        lo = jnp.where(start == 0, -jnp.inf, start + m)
-        hi = jnp.where(start == size - 2 * half, jnp.inf, start + 2 * half - 1 - m)
-        inside = jnp.sum(c.valid & (c.pos >= lo) & (c.pos <= hi))
-        n_valid = jnp.sum(c.valid)
-        fits = inside >= 0.98 * n_valid
-        enough = n_valid >= config.min_valid_fraction * n
-        return start, fits & enough & jnp.isfinite(centre)
-
-    row0, ok_h = band(ch, hh, height, width)
-    col0, ok_v = band(cv, hw, width, height)
-    tracking = ok_h & ok_v
-    return eqx.tree_at(
-        lambda s: (s.row0, s.col0, s.tracking),
-        state,
-        (jnp.where(ok_h, row0, state.row0), jnp.where(ok_v, col0, state.col0), tracking),
-    )
 
 
 def stripe_points(sensor: Sensor, c: Centres, axis: int, plane: int, dtype):
@@ -438,7 +414,7 @@ def _process(sensor, config: PipelineConfig, rgb, state: PipelineState, roi: boo
     else:
         I = frame_input(rgb, config.weights, dtype, config.fill_clipped, dome)
         ch, cv, steps, kurt, new, used_roi = _full(I, state, config)
-    new = _next_bands(ch, cv, new, config, (height, width))
+    new = next_bands(ch, cv, new, config, (height, width))
     Ph, keep_h = clean_profile(stripe_points(sensor, ch, 0, 0, dtype), ch.valid, config)
     Pv, keep_v = clean_profile(stripe_points(sensor, cv, 1, 1, dtype), cv.valid, config)
     fh, fv, junction = weld_features(

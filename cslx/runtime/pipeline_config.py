@@ -86,6 +86,9 @@ class PipelineConfig(eqx.Module):
     roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
+    roi_lean: a stripe that does not fit its straight band gets a band that follows its
+        fitted line (`cslx.runtime.band_lean`, a rolled projector; issues 12 / 13) when
+        ``roi_lean_fraction`` of its valid centres lie inside that band (evidence there).
     first_pass / first_pass_fraction: on a frame without tracking state (the first, or
         after the stripes were lost) with the ROI allowed, locate the bands from the
         brightest sample of each column / row (`_first_pass`) and run MED (from the band
@@ -216,6 +219,8 @@ class PipelineConfig(eqx.Module):
     roi_half_h: int = eqx.field(static=True, default=32)
     roi_half_w: int = eqx.field(static=True, default=64)
     roi_margin: int = eqx.field(static=True, default=8)
+    roi_lean: bool = eqx.field(static=True, default=True)
+    roi_lean_fraction: float = eqx.field(static=True, default=0.95)
     first_pass: bool = eqx.field(static=True, default=True)
     first_pass_fraction: float = eqx.field(static=True, default=0.9)
     min_valid_fraction: float = eqx.field(static=True, default=0.5)

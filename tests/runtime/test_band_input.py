@@ -5,7 +5,14 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cslx.runtime.band_input import band_image, frame_input, frame_stats, image_cutter, rgb_cutter
+from cslx.runtime.band_input import (
+    band_image,
+    frame_input,
+    frame_stats,
+    image_cutter,
+    rgb_cutter,
+    sheared_band,
+)
 from cslx.runtime.pipeline import PipelineConfig, _bands, _dome, init_state
 from cslx.segmentation.robust import MAX_RUN
 
@@ -47,6 +54,36 @@ def test_band_image_equals_band_of_filled_frame(seed, dome):
     # without the fill: the colour image's band
     plain = np.asarray(cut(rgb, 5, 16, 0, W, jnp.float32, False))
     np.testing.assert_array_equal(plain, np.asarray(frame_input(rgb, W, jnp.float32, False))[5:21])
+
+
+#: The tracker's dome (`tracking_config`): down the columns, no test across them.
+DOME_TRACKER = (1.0, 0.0, 0.5, 7, 1, 0)
+
+
+@pytest.mark.parametrize("dome", [(), DOME_TRACKER])
+def test_sheared_band_equals_interpolated_rows_of_filled_frame(dome):
+    """A band following a leaning stripe (`sheared_band`, `cslx.runtime.band_lean`): column
+    u's samples are the filled frame's rows start[u] + r, interpolated between whole rows;
+    exact where start[u] is a whole row. Starts at both frame borders, steep both ways."""
+    rgb = _clipped_frame(1)
+    I_h, I_v = frame_input(rgb, W, jnp.float32, True, dome)
+    cut = jax.jit(sheared_band, static_argnums=(2, 3, 4, 5, 6, 7))
+    for axis, ref, size in ((0, np.asarray(I_h), 16), (1, np.asarray(I_v).T, 24)):
+        n, m = rgb.shape[axis], rgb.shape[1 - axis]
+        for c, b in ((0.0, 0.7), (n - size - 1.0, -0.9), (40.3, 0.13), (3.0, 0.0)):
+            start = np.clip(c + b * np.arange(m), 0, n - size - 1).astype(np.float32)
+            got = np.asarray(cut(rgb, jnp.asarray(start), size, axis, W, jnp.float32, True, dome))
+            from_frame = np.asarray(image_cutter((I_h, I_v))(axis, jnp.asarray(start), size))
+            got, from_frame = (got, from_frame) if axis == 0 else (got.T, from_frame.T)
+            first = np.floor(start).astype(int)
+            f = start - first
+            rows = np.take_along_axis(ref, first[None] + np.arange(size + 1)[:, None], 0)
+            want = (1 - f) * rows[:-1] + f * rows[1:]
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-4)
+            np.testing.assert_allclose(from_frame, want, rtol=0, atol=1e-4)
+            whole = f == 0
+            assert whole.any()
+            np.testing.assert_array_equal(got[:, whole], rows[:-1][:, whole])
 
 
 def test_bands_from_rgb_equal_bands_of_converted_frame():
