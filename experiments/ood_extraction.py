@@ -155,6 +155,38 @@ roll35/saturated H 98.02 → 97.80, 0.58 (13) → 0.18 (4), 0.046 / 0.205 → 0.
 67 → 0; V unchanged on both (bit for bit). Not fixed: the cross turned 45°
 (fresh 7500–7502, no-stripe test off: 88–97 % detection but 9–328 gross centres and 100–196
 false positives a stripe, clean or sunny): beyond the crossing step's reach.
+
+The cross turned 45° (conditions roll45/clean, /sunny, /saturated, added; branch cross45).
+Diagnosed on fresh seeds 7700–7701 (frames 0–1): at 45° the stripes run at 46.5° and −50°
+(slopes +1.05 and −1.19 rows per column), both within the path's free slope of 1 px per
+column, so the path followed one stripe to the crossing and the other after it, or jumped
+across a gap onto the other (p95 86–160 mm, 18–73 % gross). `cslx.segmentation.orient`
+measures each stripe's direction (Hessian directions of the 4 × 4-block image, the peak
+nearest the search axis), and where it is ≥ 25° from the axis the first pass smooths along
+it and links the offsets from it; pieces of the path along the other stripe are dropped
+(saturated V at 7700–7701: 46 gross → 0, false positives 440 → 0) and the path's ends cut
+where the strength falls below half its plateau (smoothed along the stripe, the fan's end
+is an erf ramp: 7701/0 clean H, 14 false centres past the end → 3). Every development
+frame's stripe lies within 6.6° of its axis (seeds 7100–7117, frame 0), so none is
+oriented: the development benchmark (18 conditions, both stripes, old and new on each frame
+in one process) is bit-identical (pooled H / V 100.00 / 99.92 %, 0 gross, 0.0283 / 0.0277
+mm, p95 0.123 / 0.127). Before → after, fresh seeds 7702–7703, frames 0–1 (4 frames per
+condition), old and new on each frame in one process; detection %, gross % (count), median
+/ p95 mm, false positives: roll45/clean H 92.57 → 98.99, 6.39 (105) → 0, 0.079 / 33.2 →
+0.045 / 0.217, fp 366 → 2; V 92.69 → 98.45, 62.0 (778) → 0, 63.7 / 164 → 0.033 / 0.116,
+fp 490 → 0; roll45/sunny H 92.85 → 98.87, 16.9 (279) → 0, 0.106 / 84.3 → 0.062 / 0.237,
+fp 412 → 1; V 70.75 → 96.82, 35.3 (338) → 0, 0.141 / 165 → 0.049 / 0.137, fp 372 → 0;
+roll45/saturated H 99.32 → 96.73, 20.2 (357) → 0.17 (3), 0.101 / 83.0 → 0.052 / 0.294, fp
+429 → 3; V 98.23 → 95.35, 39.6 (526) → 0, 0.124 / 151 → 0.035 / 0.168, fp 522 → 0. The 35°
+cross is oriented too: roll35/sunny H 97.37 → 98.97, 0.04 (1) → 0, 0.037 / 0.226 → 0.032 /
+0.166, fp 0 → 2; V 97.85 → 98.57, 0.06 (1) → 0, 0.031 / 0.193 → 0.025 / 0.158;
+roll35/saturated mixed: H 97.59 → 97.59, 0.13 (3) → 0.09 (2), 0.037 / 0.189 → 0.036 /
+0.205, fp 0 → 8; V 96.96 → 95.97, 0 → 0.23 (4, one frame), 0.047 / 0.187 → 0.052 / 0.172.
+roll20 (stripes at 13–20°) is not oriented: identical. The detection still lost at 45°
+(1–5 %) is at the ends and the border. Cost (640×480, load 7): the direction 2–5 ms, the
+smoothing along 55–85 ms (37 taps with interpolation across; computed once for both σ
+passes); whole frame and stripe, roll45, 139–244 → 279–335 ms (before the smoothing was
+shared by the two passes).
 """
 
 from __future__ import annotations
@@ -274,6 +306,9 @@ CONDITIONS: dict[str, Condition] = {
     "jpeg95/saturated": Condition(nuisance="saturated", jpeg=95),
     "jpeg70/sunny": Condition(nuisance="sunny", jpeg=70),
     "motion/sunny": Condition(nuisance="sunny", motion_mm=6.0, kinds=("straight",)),
+    "roll45/clean": Condition("roll45"),
+    "roll45/sunny": Condition("roll45", "sunny"),
+    "roll45/saturated": Condition("roll45", "saturated"),
 }
 
 
