@@ -183,10 +183,24 @@ cross is oriented too: roll35/sunny H 97.37 → 98.97, 0.04 (1) → 0, 0.037 / 0
 roll35/saturated mixed: H 97.59 → 97.59, 0.13 (3) → 0.09 (2), 0.037 / 0.189 → 0.036 /
 0.205, fp 0 → 8; V 96.96 → 95.97, 0 → 0.23 (4, one frame), 0.047 / 0.187 → 0.052 / 0.172.
 roll20 (stripes at 13–20°) is not oriented: identical. The detection still lost at 45°
-(1–5 %) is at the ends and the border. Cost (640×480, load 7): the direction 2–5 ms, the
-smoothing along 55–85 ms (37 taps with interpolation across; computed once for both σ
-passes); whole frame and stripe, roll45, 139–244 → 279–335 ms (before the smoothing was
-shared by the two passes).
+(1–5 %) is at the ends and the border. Cost (640×480, warm, load 0.7–1.6, one run, old and
+new alternating): the direction 1.4–2.0 ms, the smoothing along 14–18 ms (37 taps with
+interpolation across; computed once for both σ passes); whole frame and stripe, roll45 54–69
+→ 70–103 ms, roll35/sunny 62 / 76 → 80 / 71 ms (H / V), the default rig (sunny, not
+oriented) 50 / 46 → 53 / 53 ms. Held out (seed 7480 + condition, 4 frames, run once at the
+end; the roll45 conditions' seeds 7503–7505 share frames 0–1's worlds and poses with the
+earlier 35° development seeds 7500–7515, other rigs): roll45/clean H 93.95 → 98.30, 20.35
+(338) → 0, 0.087 / 87.7 → 0.035 / 0.187, fp 432 → 2; V 92.69 → 98.36, 55.1 (685) → 0, 41.5
+/ 156 → 0.025 / 0.127, fp 515 → 0; roll45/sunny H 93.00 → 98.81, 11.5 (190) → 0.34 (6),
+0.071 / 72.0 → 0.045 / 0.211, fp 405 → 2; V 92.67 → 98.00, 38.9 (487) → 0, 0.162 / 153 →
+0.021 / 0.248, fp 519 → 0; roll45/saturated H 98.02 → 96.61, 14.7 (255) → 0.12 (2), 0.074 /
+75.0 → 0.035 / 0.228, fp 411 → 8; V 100 → 95.35, 75.3 (1021) → 0, 77.9 / 159 → 0.035 /
+0.114, fp 511 → 0; roll35/sunny H 96.19 → 98.34, 0.82 (18) → 0, 0.044 / 0.305 → 0.039 /
+0.190, fp 0 → 2; V 97.98 → 98.32, 0 → 0, 0.031 / 0.201 → 0.029 / 0.149; roll35/saturated H
+97.80 → 97.41, 0.18 (4) → 0.05 (1), 0.045 / 0.208 → 0.044 / 0.201, fp 0 → 7; V 96.81 →
+95.84, 0 → 0, 0.038 / 0.177 → 0.042 / 0.195 (worse); roll20/clean identical. Open: the
+saturated 35° vertical stripe (its first pass at 29° from the axis) loses ≈ 1 % detection
+and 0.004 mm median when oriented; a 45° saturated stripe's ends and border cost 3–5 %.
 """
 
 from __future__ import annotations
