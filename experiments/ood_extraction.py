@@ -155,6 +155,52 @@ roll35/saturated H 98.02 → 97.80, 0.58 (13) → 0.18 (4), 0.046 / 0.205 → 0.
 67 → 0; V unchanged on both (bit for bit). Not fixed: the cross turned 45°
 (fresh 7500–7502, no-stripe test off: 88–97 % detection but 9–328 gross centres and 100–196
 false positives a stripe, clean or sunny): beyond the crossing step's reach.
+
+The cross turned 45° (conditions roll45/clean, /sunny, /saturated, added; branch cross45).
+Diagnosed on fresh seeds 7700–7701 (frames 0–1): at 45° the stripes run at 46.5° and −50°
+(slopes +1.05 and −1.19 rows per column), both within the path's free slope of 1 px per
+column, so the path followed one stripe to the crossing and the other after it, or jumped
+across a gap onto the other (p95 86–160 mm, 18–73 % gross). `cslx.segmentation.orient`
+measures each stripe's direction (Hessian directions of the 4 × 4-block image, the peak
+nearest the search axis), and where it is ≥ 25° from the axis the first pass smooths along
+it and links the offsets from it; pieces of the path along the other stripe are dropped
+(saturated V at 7700–7701: 46 gross → 0, false positives 440 → 0) and the path's ends cut
+where the strength falls below half its plateau (smoothed along the stripe, the fan's end
+is an erf ramp: 7701/0 clean H, 14 false centres past the end → 3). Every development
+frame's stripe lies within 6.6° of its axis (seeds 7100–7117, frame 0), so none is
+oriented: the development benchmark (18 conditions, both stripes, old and new on each frame
+in one process) is bit-identical (pooled H / V 100.00 / 99.92 %, 0 gross, 0.0283 / 0.0277
+mm, p95 0.123 / 0.127). Before → after, fresh seeds 7702–7703, frames 0–1 (4 frames per
+condition), old and new on each frame in one process; detection %, gross % (count), median
+/ p95 mm, false positives: roll45/clean H 92.57 → 98.99, 6.39 (105) → 0, 0.079 / 33.2 →
+0.045 / 0.217, fp 366 → 2; V 92.69 → 98.45, 62.0 (778) → 0, 63.7 / 164 → 0.033 / 0.116,
+fp 490 → 0; roll45/sunny H 92.85 → 98.87, 16.9 (279) → 0, 0.106 / 84.3 → 0.062 / 0.237,
+fp 412 → 1; V 70.75 → 96.82, 35.3 (338) → 0, 0.141 / 165 → 0.049 / 0.137, fp 372 → 0;
+roll45/saturated H 99.32 → 96.73, 20.2 (357) → 0.17 (3), 0.101 / 83.0 → 0.052 / 0.294, fp
+429 → 3; V 98.23 → 95.35, 39.6 (526) → 0, 0.124 / 151 → 0.035 / 0.168, fp 522 → 0. The 35°
+cross is oriented too: roll35/sunny H 97.37 → 98.97, 0.04 (1) → 0, 0.037 / 0.226 → 0.032 /
+0.166, fp 0 → 2; V 97.85 → 98.57, 0.06 (1) → 0, 0.031 / 0.193 → 0.025 / 0.158;
+roll35/saturated mixed: H 97.59 → 97.59, 0.13 (3) → 0.09 (2), 0.037 / 0.189 → 0.036 /
+0.205, fp 0 → 8; V 96.96 → 95.97, 0 → 0.23 (4, one frame), 0.047 / 0.187 → 0.052 / 0.172.
+roll20 (stripes at 13–20°) is not oriented: identical. The detection still lost at 45°
+(1–5 %) is at the ends and the border. Cost (640×480, warm, load 0.7–1.6, one run, old and
+new alternating): the direction 1.4–2.0 ms, the smoothing along 14–18 ms (37 taps with
+interpolation across; computed once for both σ passes); whole frame and stripe, roll45 54–69
+→ 70–103 ms, roll35/sunny 62 / 76 → 80 / 71 ms (H / V), the default rig (sunny, not
+oriented) 50 / 46 → 53 / 53 ms. Held out (seed 7480 + condition, 4 frames, run once at the
+end; the roll45 conditions' seeds 7503–7505 share frames 0–1's worlds and poses with the
+earlier 35° development seeds 7500–7515, other rigs): roll45/clean H 93.95 → 98.30, 20.35
+(338) → 0, 0.087 / 87.7 → 0.035 / 0.187, fp 432 → 2; V 92.69 → 98.36, 55.1 (685) → 0, 41.5
+/ 156 → 0.025 / 0.127, fp 515 → 0; roll45/sunny H 93.00 → 98.81, 11.5 (190) → 0.34 (6),
+0.071 / 72.0 → 0.045 / 0.211, fp 405 → 2; V 92.67 → 98.00, 38.9 (487) → 0, 0.162 / 153 →
+0.021 / 0.248, fp 519 → 0; roll45/saturated H 98.02 → 96.61, 14.7 (255) → 0.12 (2), 0.074 /
+75.0 → 0.035 / 0.228, fp 411 → 8; V 100 → 95.35, 75.3 (1021) → 0, 77.9 / 159 → 0.035 /
+0.114, fp 511 → 0; roll35/sunny H 96.19 → 98.34, 0.82 (18) → 0, 0.044 / 0.305 → 0.039 /
+0.190, fp 0 → 2; V 97.98 → 98.32, 0 → 0, 0.031 / 0.201 → 0.029 / 0.149; roll35/saturated H
+97.80 → 97.41, 0.18 (4) → 0.05 (1), 0.045 / 0.208 → 0.044 / 0.201, fp 0 → 7; V 96.81 →
+95.84, 0 → 0, 0.038 / 0.177 → 0.042 / 0.195 (worse); roll20/clean identical. Open: the
+saturated 35° vertical stripe (its first pass at 29° from the axis) loses ≈ 1 % detection
+and 0.004 mm median when oriented; a 45° saturated stripe's ends and border cost 3–5 %.
 """
 
 from __future__ import annotations
@@ -274,6 +320,9 @@ CONDITIONS: dict[str, Condition] = {
     "jpeg95/saturated": Condition(nuisance="saturated", jpeg=95),
     "jpeg70/sunny": Condition(nuisance="sunny", jpeg=70),
     "motion/sunny": Condition(nuisance="sunny", motion_mm=6.0, kinds=("straight",)),
+    "roll45/clean": Condition("roll45"),
+    "roll45/sunny": Condition("roll45", "sunny"),
+    "roll45/saturated": Condition("roll45", "saturated"),
 }
 
 

@@ -29,7 +29,10 @@ The method "linked" of `cslx.segmentation.extract` (the default since issue 11):
    On the development frames σ across changed little (1.5 / 2.5 px: medians 0.057 / 0.057 mm
    horizontal); `SIGMA_ALONG` 6 / 10 / 15 px gave horizontal medians 0.059 / 0.051 / 0.048 mm, p95
    0.22 / 0.24 / 0.34 mm, and vertical gross 0.24 / 1.3 / 3.7 %: longer smoothing rounds the
-   bead's corners, so 6 px.
+   bead's corners, so 6 px. A stripe turned ≥ `orient.MIN_DEG` from its axis (a rolled cross)
+   is smoothed along its measured direction instead and linked by its offsets from it; the
+   path's pieces along the other stripe and its ends' tails below half the plateau strength
+   are dropped (`orient`, `ORIENT`). The default rig's stripes (< 7°) are untouched.
 4. Linking (`cslx.segmentation.ridges.linked_centres`): K candidates per column, Viterbi
    path, outliers and short detours dropped, predicted standard deviation per centre; short
    pieces far off the path across a gap (`ridges.drop_stray`) dropped before and after step 5.
@@ -148,7 +151,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SIGMA_MAX
-from . import chroma, crossing, ends, presence
+from . import chroma, crossing, ends, orient, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -344,12 +347,21 @@ def linked_extract(
     sa = SIGMA_ALONG
     first = SIGMA0 if sigma is None else float(sigma)
     final = first
-    c, width = linked_centres(mono, sigma=first, axis=axis, k=k, params=params, sigma_along=sa)
+    # a stripe turned far from its axis: smoothed and linked along it (`orient`)
+    slope, other = orient.search_slope(mono if axis == 0 else mono.T) if ORIENT else (None,) * 2
+    kw = dict(axis=axis, k=k, params=params, sigma_along=sa, slope=slope)
+    if slope is not None:  # computed once for both passes
+        kw["along"] = orient.smooth_along(mono.T if axis == 0 else mono, slope, sigma=sa)
+    c, width = linked_centres(mono, sigma=first, **kw)
     if sigma is None:
         # The first pass at the floor σ is final unless the measured width asks for more.
         final = stripe_sigma(width, min(mono.shape))
         if final != first:
-            c, _ = linked_centres(mono, sigma=final, axis=axis, k=k, params=params, sigma_along=sa)
+            c, _ = linked_centres(mono, sigma=final, **kw)
+    if slope is not None and DROP_OTHER:
+        v = orient.drop_other(c.pos, c.valid, slope, other)
+        v = jnp.asarray(orient.trim_ends(v, c.strength) if TRIM_ENDS else v)
+        c = c._replace(pos=jnp.where(v, c.pos, jnp.nan), valid=v)
     pos, valid, sig, sat, bridged = _finish(
         c.pos, c.valid, c.sigma, filled, blind, axis=axis, trim=END_TRIM
     )
@@ -423,6 +435,12 @@ REFINE = True
 CROSSING = EDGE_DROP = True
 #: Drop the first pass's tail past a turned stripe's end inside the frame (`ends`), step 5.
 END_TRIM = True
+#: Smooth and link a stripe turned ≥ `orient.MIN_DEG` from its axis along it (`orient`), step 3.
+ORIENT = True
+#: With `ORIENT`, drop the pieces of the first path that run along the other stripe.
+DROP_OTHER = True
+#: With `ORIENT`, cut the path's ends where the strength falls below half its plateau.
+TRIM_ENDS = True
 #: Step 7 on a chroma-subsampled frame (`chroma.subsampled`: JPEG, YUYV; never a rendered
 #: one) whose path is at least `CHROMA_SATURATED` saturated runs on this signal as well
 #: (`chroma.second_signal`; None: off), its centres weighted `CHROMA_BLEND` against the colour

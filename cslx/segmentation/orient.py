@@ -1,0 +1,212 @@
+"""A stripe turned far from its search axis: smooth and link along it (issue 11, roll 45°).
+
+The linked detector's first pass (`cslx.segmentation.ridges`, column profiles) smooths the
+image by `SIGMA_ALONG` (6 px) along the image axis and links one candidate per column with a
+free slope of 1 px per column (`LinkParams.slope`). A cross turned by ≈ 45° about the camera
+axis breaks both: each column's profile of a stripe of slope m is smeared by ≈ 6 |m| px, and
+the two stripes (slopes ≈ +1.05 and −1.19 rows per column at 45°: angles 46.5° and −50° on
+the fresh frames 7700–7705) both cost the path almost nothing, so it follows one stripe up
+to the crossing and the other after it (roll 45°, seeds 7700–7701, frames 0–1: p95 86–160
+mm, 18–73 % gross centres, 397–526 false positives a stripe).
+
+`search_slope` measures the stripe's direction: the image (search orientation, the stripe
+one centre per column) is averaged in 4 × 4 blocks, its Hessian at σ `HESSIAN_SIGMA` (in
+blocks) gives each line-like pixel (λ_min < 0, |λ_min| > 2 |λ_max|) a direction θ =
+½ atan2(2 h_uv, h_uu − h_vv) (the eigenvector of the larger eigenvalue) and a weight
+λ_min², summed in 1° bins and smoothed circularly (σ 2°). Of the peaks holding at least
+`PEAK_SHARE` of the largest, the one nearest the search axis is this stripe (the other
+stripe of the cross is the one nearer the other axis: the naming of `extract`'s "h" / "v");
+its angle θ is refined by the bins' mean within ±3°. Where |θ| ≥ `MIN_DEG` the first pass
+then runs along it (`slope` = tan θ): `smooth_along` smooths by `SIGMA_ALONG` along the line
+(1, m) instead of the axis (linear interpolation across), and the Viterbi links the
+candidates' offsets from that line (`ridges._linked(slope=...)`), so the stripe is flat to
+the path and the other stripe steep. Below `MIN_DEG` nothing changes (bit for bit).
+
+Evidence: the module docstring of `experiments/ood_extraction.py`.
+
+Pure JAX (the histogram) and NumPy on its 180 bins.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from .steger import _filter_axis, _taps
+
+__all__ = [
+    "MIN_DEG",
+    "PEAK_SHARE",
+    "direction_histogram",
+    "drop_other",
+    "peak_angles",
+    "search_slope",
+    "smooth_along",
+]
+
+#: A stripe whose direction is at least this far (degrees) from its search axis is smoothed
+#: and linked along it.
+MIN_DEG = 25.0
+#: Peaks of the direction histogram below this share of the largest are not stripes.
+PEAK_SHARE = 0.25
+#: Scale (in 4 × 4 blocks) of the Hessian that measures the directions.
+HESSIAN_SIGMA = 1.0
+#: Block size of the average taken before the Hessian.
+BLOCK = 4
+#: Largest |slope| `smooth_along` accepts (the padding is static): 60°.
+MAX_SLOPE = math.tan(math.radians(60.0))
+
+
+@jax.jit
+def direction_histogram(img):
+    """(180,) weights of line directions θ = −90 … 89° (1° bins) in `img` (H, W); θ is the
+    angle of the line to axis 1 (the search orientation's "along"), positive towards +axis 0."""
+    h, w = (img.shape[0] // BLOCK) * BLOCK, (img.shape[1] // BLOCK) * BLOCK
+    small = img[:h, :w].reshape(h // BLOCK, BLOCK, w // BLOCK, BLOCK).mean((1, 3))
+    s = HESSIAN_SIGMA
+    a0, a1, a2 = _filter_axis(small, s, (0, 1, 2), 0)  # along axis 0 (v)
+    hvv = _filter_axis(a2, s, (0,), 1)[0]
+    huv = _filter_axis(a1, s, (1,), 1)[0]
+    huu = _filter_axis(a0, s, (2,), 1)[0]
+    half, diff = 0.5 * (huu + hvv), jnp.sqrt(0.25 * (huu - hvv) ** 2 + huv**2)
+    lmin, lmax = half - diff, half + diff
+    line = (lmin < 0) & (-lmin > 2 * jnp.abs(lmax))
+    theta = 0.5 * jnp.degrees(jnp.arctan2(2 * huv, huu - hvv))  # along the line, (−90, 90]
+    idx = jnp.floor(theta + 90.0).astype(jnp.int32) % 180
+    weight = jnp.where(line, lmin**2, 0.0)
+    return jax.ops.segment_sum(weight.reshape(-1), idx.reshape(-1), 180)
+
+
+def search_slope(img) -> tuple[float | None, float | None]:
+    """(slope, other): the slope (px across per px along) of the stripe nearest the search
+    axis in `img` (search orientation: axis 1 along, axis 0 across), None where it is
+    within `MIN_DEG` of the axis or no peak is found (module docstring); and the slope of
+    the strongest other peak (the other stripe of the cross), None where there is none."""
+    hist = np.asarray(direction_histogram(img), float)
+    angle, other = peak_angles(hist)
+    if angle is None or abs(angle) < MIN_DEG:
+        return None, None
+    slopes = [None if a is None else math.tan(math.radians(a)) for a in (angle, other)]
+    return float(np.clip(slopes[0], -MAX_SLOPE, MAX_SLOPE)), slopes[1]
+
+
+def peak_angles(hist: np.ndarray) -> tuple[float | None, float | None]:
+    """The angles (degrees) of the histogram's significant peak nearest 0 and of the
+    strongest other peak at least 20° from it (module docstring); None where absent."""
+    k = np.arange(-6, 7)
+    g = np.exp(-0.5 * (k / 2.0) ** 2)
+    smooth = sum(gi * np.roll(hist, -ki) for ki, gi in zip(k, g, strict=True))
+    top = smooth.max()
+    if not top > 0:
+        return None, None
+    peaks = (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1))
+    peaks &= smooth >= PEAK_SHARE * top
+    angles = np.arange(180) - 89.5  # bin centres
+    cand = np.flatnonzero(peaks)
+    if cand.size == 0:
+        return None, None
+    i = cand[np.argmin(np.abs(angles[cand]))]
+    far = cand[np.abs((angles[cand] - angles[i] + 90) % 180 - 90) >= 20]
+    j = far[np.argmax(smooth[far])] if far.size else None
+    return _refine(hist, angles, i), None if j is None else _refine(hist, angles, j)
+
+
+def _refine(hist, angles, i) -> float:
+    """A peak's angle: the histogram's mean within ±3 bins of bin i."""
+    offs = np.arange(-3, 4)
+    wts = hist[(i + offs) % 180]
+    return float(angles[i] + (wts @ offs) / wts.sum()) if wts.sum() > 0 else float(angles[i])
+
+
+#: `drop_other`: pieces of the path split by gaps of at least `PIECE_GAP` centres; pieces
+#: shorter than `PIECE_MIN` are left to `ridges.drop_stray`.
+PIECE_GAP = 4
+PIECE_MIN = 12
+
+
+def drop_other(pos, valid, slope: float, other: float | None) -> np.ndarray:
+    """`valid` without the pieces of the path that run along the other stripe.
+
+    Linked by offsets from this stripe's line (`ridges._linked(slope=...)`), the other
+    stripe of a cross turned ≈ 45° has a relative slope d = other − slope of only ≈ 1.8–2.2
+    px per centre, which the path's smoothness cost (β (|Δ| − 1)² ≈ 0.3–0.7) lets the
+    reward of a strong stripe pay for: where this stripe ends (leaves the frame or the fan
+    ends), the path continued along the other one across a gap (roll 45° saturated,
+    vertical stripe, fresh seeds 7700–7701: 103–114 false centres a frame). A piece (split
+    by gaps ≥ `PIECE_GAP`, at least `PIECE_MIN` centres) whose least-squares relative slope
+    b lies nearer d than 0 is dropped."""
+    pos, valid = np.asarray(pos, float), np.asarray(valid, bool).copy()
+    if other is None:
+        return valid
+    d = other - slope
+    j = np.flatnonzero(valid)
+    if j.size == 0:
+        return valid
+    cuts = np.flatnonzero(np.diff(j) > PIECE_GAP)
+    for piece in np.split(j, cuts + 1):
+        if piece.size < PIECE_MIN:
+            continue
+        b = np.polyfit(piece, pos[piece] - slope * piece, 1)[0]
+        if abs(b - d) < abs(b):
+            valid[piece] = False
+    return valid
+
+
+#: `trim_ends`: an end of the path is cut where its strength falls below `END_SHARE` of the
+#: median strength of the `END_PLATEAU` centres that follow the first `END_SKIP` inside it.
+END_SHARE = 0.5
+END_SKIP = 12
+END_PLATEAU = 40
+
+
+def trim_ends(valid, strength) -> np.ndarray:
+    """`valid` without the path's tails past the stripe's ends (half the plateau strength).
+
+    Smoothed along the stripe by a Gaussian (σ_along), a fan's end inside the frame becomes
+    an erf ramp of the ridge strength along the path: half the plateau at the end, ≈ 4 % two
+    σ_along past it, still a rewarded candidate. So the path ran on past the end along the
+    line (roll 45° clean, seed 7701 frame 0, horizontal stripe: 14 columns past the end at
+    column 94). Each end of the path is cut back to the first centre whose strength reaches
+    `END_SHARE` × the median strength of the centres `END_SKIP` to `END_SKIP` +
+    `END_PLATEAU` inside it. A stripe leaving the frame along the search axis keeps its
+    strength to the border (the smoothing mirrors the image there) and is not cut."""
+    valid = np.asarray(valid, bool).copy()
+    z = np.asarray(strength, float)
+    for order in (slice(None), slice(None, None, -1)):
+        idx = np.flatnonzero(valid[order])
+        if idx.size < END_SKIP + END_PLATEAU:
+            continue
+        zz = z[order][idx]
+        plateau = np.median(zz[END_SKIP : END_SKIP + END_PLATEAU])
+        strong = np.flatnonzero(zz[:END_SKIP] >= END_SHARE * plateau)
+        cut = strong[0] if strong.size else END_SKIP
+        valid[order][idx[:cut]] = False
+    return valid
+
+
+@functools.partial(jax.jit, static_argnames=("sigma",))
+def smooth_along(x, slope, *, sigma: float):
+    """out[u, v] = Σ_k g(k) x[u + k, v + slope · k]: a Gaussian (σ `sigma`) along the line
+    of `slope` through every pixel of `x` (W, H) — axis 0 along, axis 1 across, the
+    transposed layout of `ridges._candidates_column`. Symmetric padding along (as
+    `steger._filter_axis`), edge values across; linear interpolation across."""
+    taps = _taps(sigma, 0)
+    r = len(taps) - 1
+    big = int(math.ceil(MAX_SLOPE * r)) + 2
+    n, m = x.shape
+    xp = jnp.pad(jnp.pad(x, ((r, r), (0, 0)), mode="symmetric"), ((0, 0), (big, big)), mode="edge")
+    slope = jnp.clip(slope, -MAX_SLOPE, MAX_SLOPE).astype(x.dtype)
+    out = jnp.zeros_like(x)
+    for k in range(-r, r + 1):
+        d = slope * k
+        i = jnp.floor(d)
+        f = d - i
+        rows = lax.slice_in_dim(xp, r + k, r + k + n, axis=0)
+        win = lax.dynamic_slice_in_dim(rows, big + i.astype(jnp.int32), m + 1, axis=1)
+        out = out + float(taps[abs(k)]) * ((1 - f) * win[:, :m] + f * win[:, 1:])
+    return out

@@ -1,0 +1,97 @@
+"""A stripe turned far from its search axis (cslx.segmentation.orient): its direction,
+smoothing along it, and the path's pieces along the other stripe of the cross."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cslx.segmentation import extract, orient
+from cslx.segmentation.steger import _filter_axis
+
+H, W = 120, 200  # the frame of tests/segmentation/test_robust.py: shared programs
+
+
+def _cross(rng, a_h: float, a_v: float, noise: float = 2.0):
+    """Two Gaussian stripes (s 1.3 px) at angles a_h and a_v (degrees from the u axis,
+    positive towards +v) through (u, v) = (100.3, 60.4); the first one's true row per
+    column (NaN outside the frame)."""
+    u = np.arange(W, dtype=float)
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    img = np.full((H, W), 20.0)
+    for a in (a_h, a_v):
+        n = (-math.sin(math.radians(a)), math.cos(math.radians(a)))  # normal
+        d = (uu - 100.3) * n[0] + (vv - 60.4) * n[1]
+        img = img + 120.0 * np.exp(-0.5 * (d / 1.3) ** 2)
+    v_true = 60.4 + math.tan(math.radians(a_h)) * (u - 100.3)
+    v_true[(v_true < 0) | (v_true > H - 1)] = np.nan
+    return img + rng.normal(0, noise, img.shape), v_true
+
+
+def test_directions_of_a_cross_turned_45_degrees():
+    rng = np.random.default_rng(31)
+    img, _ = _cross(rng, 46.5, -50.0)  # the rolled rig's angles (experiments.ood_extraction)
+    angle, other = orient.peak_angles(np.asarray(orient.direction_histogram(img)))
+    # the nearer peak is the stripe searched column by column; 1° bins, 4 × 4 blocks
+    assert abs(angle - 46.5) < 1.5 and abs(other + 50.0) < 1.5
+    slope, other_slope = orient.search_slope(img)
+    assert abs(slope - math.tan(math.radians(46.5))) < 0.06
+    # an aligned cross is left to the image axes (below MIN_DEG)
+    img0, _ = _cross(rng, 2.0, 91.0)
+    assert orient.search_slope(img0) == (None, None)
+
+
+def test_smooth_along_is_the_axis_filter_at_slope_zero_and_follows_a_slope():
+    rng = np.random.default_rng(32)
+    x = rng.normal(size=(80, 60)).astype(np.float32)
+    a = np.asarray(orient.smooth_along(x, 0.0, sigma=3.0))
+    (b,) = _filter_axis(x, 3.0, (0,), 0)
+    assert np.allclose(a, np.asarray(b), atol=1e-5)
+    # a line of slope 0.8 (along axis 0, across axis 1) keeps its profile when smoothed
+    # along it, and is smeared when smoothed along the axis
+    u, v = np.mgrid[0:80, 0:60].astype(np.float32)
+    line = np.exp(-0.5 * ((v - 10.2 - 0.8 * (u - 20)) / 1.2) ** 2).astype(np.float32)
+    along = np.asarray(orient.smooth_along(line, 0.8, sigma=3.0))[40]
+    (axis,) = _filter_axis(line, 3.0, (0,), 0)
+    assert along.max() > 0.9 and np.asarray(axis)[40].max() < 0.5
+    assert abs(np.argmax(along) - (10.2 + 0.8 * 20)) <= 1
+
+
+def test_drop_other_drops_a_piece_along_the_other_stripe():
+    j = np.arange(300, dtype=float)
+    pos = 1.05 * j + 5.0  # this stripe, slope 1.05
+    pos[:100] = 200.0 - 1.19 * j[:100]  # a piece along the other stripe (slope −1.19)
+    valid = np.ones(300, bool)
+    valid[100:130] = False  # the gap the path jumped across
+    kept = orient.drop_other(pos, valid, 1.05, -1.19)
+    assert not kept[:100].any() and kept[130:].all()
+    # no other stripe known: nothing dropped
+    assert (orient.drop_other(pos, valid, 1.05, None) == valid).all()
+
+
+@pytest.mark.slow
+def test_a_cross_turned_45_degrees_is_extracted_along_each_stripe():
+    rng = np.random.default_rng(33)
+    img, v_true = _cross(rng, 46.5, -50.0)
+    c = extract(img, "linked", stripe="h")
+    pos, valid = np.asarray(c.pos), np.asarray(c.valid)
+    inner = np.isfinite(v_true) & (v_true > 6) & (v_true < H - 7)
+    inner &= np.abs(np.arange(W) - 100.3) > 12  # the crossing: `crossing` interpolates it
+    # Without `orient` the path followed the other stripe over part of the frame (errors of
+    # tens of px); with it, every inner column is found on this stripe.
+    assert valid[inner].mean() > 0.95
+    err = np.abs(pos - v_true)[inner & valid]
+    assert np.median(err) < 0.1 and err.max() < 0.5
+    assert not valid[~np.isfinite(v_true)].any()
+
+
+def test_trim_ends_cuts_a_tail_below_half_the_plateau_strength():
+    z = np.full(200, 100.0)
+    z[:10] = np.linspace(5.0, 45.0, 10)  # the erf ramp past a fan's end (smoothed along)
+    z[10:14] = [60.0, 80.0, 95.0, 100.0]
+    valid = np.ones(200, bool)
+    valid[190:] = False
+    kept = orient.trim_ends(valid, z)
+    assert not kept[:10].any() and kept[10:190].all() and not kept[190:].any()
