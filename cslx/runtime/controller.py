@@ -42,44 +42,44 @@ distance are kept, and the first confident observation resumes the manoeuvre. `d
 caller's measured time between frames (frame timestamps or the clock), never assumed.
 
 T-junction state machine:
-FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed` (default
-the nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm ahead, 70
-sightings at 1.5 mm per frame, and the braking limit below slows the robot in time), the
+FOLLOW → (junction seen, confident) → APPROACH: keep following at `approach_speed` (default the
+nominal speed: the vertical stripe sees the junction from ≈ 205 to 100 mm ahead, 70 sightings
+at 1.5 mm per frame, and the braking limit below slows the robot in time; once x_j <
+`lookahead_mm` + `stem_end_mm` the stripe is past the stem's end and an offset that leaves the
+stem's last confident line, dead-reckoned, by more than `stem_gate_mm` is ignored), the
 junction distance x_j along the robot's axis (a sighting x on the vertical stripe, at y_r =
-y_v, plus y_v · tan θ: the crossing weld is perpendicular to the followed one, whose heading
-is θ; taking the sighting as the axis distance, the robots of Figure 22's sunny runs at dev
-seeds 2201 and 2203, 0.9° and 1.1° off the stem, came to rest 1.44 and 1.32 mm past the T,
-with it −0.06 and −0.18 mm) is dead-reckoned (x_j −= v dt) between sightings and reset by each
-sighting that agrees with it within `junction_gate_mm` (issue 12: in rendered sunlight a stray
-report where the stripes cross, 42 mm from the truth, pushed the turn past the T), or by
-three rejected sightings in a row that agree with each other (the first sighting was the
-stray one); when
-x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` + the braking distance v²/(2 `accel_max`)
-(the robot brakes while it starts turning; without that term it came to rest ≈ 1.3–2.9 mm
-past the T in Figure 22's runs) → TURN. In place (turn_radius_mm = 0) the robot turns where
-it comes to rest, so it brakes onto x_j: the trigger is x_j ≤ tolerance + the discrete
-braking distance + one frame's travel, and each TURN frame's speed is the largest from which
-braking at `accel_max` still stops within the dead-reckoned x_j (issue 12: the former fixed
-ramp stopped wherever the trigger fell within a frame's travel, −1.25 to +0.2 mm, −0.55 mm
-mean, in a kinematic sweep at 30 mm/s and 20 fps). TURN: rotate by 90° plus the followed
-weld's last heading estimate (the crossing weld is perpendicular to the weld, not to the
-robot: a 1° heading left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld
-after the turn) — the last within `square_deg` of the robot's heading: a tracker that
-restarts on the bar near the T reports it ≈ 90° off (Figure 22, glare, one run at
-`6826bfa`: an 88° estimate at confidence 0.21, twenty frames before the turn, took the turn
-to 100° and left the look-ahead point 22.8 mm off the new weld; the robot keeps the weld
-within a few degrees, so a larger heading is not the followed weld's) —
-± (`turn_direction` +1 left/CCW, −1 right) in place (turn_radius_mm = 0)
-or on an arc; the turned angle is integrated from the commanded ω, or from the measured
-heading when the caller passes it → FOLLOW, ignoring junction sightings for
-`junction_ignore_mm` of travel. The turn ends on the crossing weld as the stripe sees it:
-once the observed offset e (confident, the weld about square) puts the rest of the turn,
+y_v, plus y_v · tan θ: the crossing weld is perpendicular to the followed one, whose heading is
+θ; taking the sighting as the axis distance, the robots of Figure 22's sunny runs at dev seeds
+2201 and 2203, 0.9° and 1.1° off the stem, came to rest 1.44 and 1.32 mm past the T, with it
+−0.06 and −0.18 mm) is dead-reckoned (x_j −= v dt) between sightings and reset by each sighting
+that agrees with it within `junction_gate_mm` (issue 12: in rendered sunlight a stray report
+where the stripes cross, 42 mm from the truth, pushed the turn past the T), or by three
+rejected sightings in a row that agree with each other (the first sighting was the stray one);
+when x_j ≤ `turn_radius_mm` + `junction_tolerance_mm` + the braking distance v²/(2 `accel_max`)
+(the robot brakes while it starts turning; without that term it came to rest ≈ 1.3–2.9 mm past
+the T in Figure 22's runs) → TURN. In place (turn_radius_mm = 0) the robot turns where it comes
+to rest, so it brakes onto x_j: the trigger is x_j ≤ tolerance + the discrete braking distance
++ one frame's travel, and each TURN frame's speed is the largest from which braking at
+`accel_max` still stops within the dead-reckoned x_j (issue 12: the former fixed ramp stopped
+wherever the trigger fell within a frame's travel, −1.25 to +0.2 mm, −0.55 mm mean, in a
+kinematic sweep at 30 mm/s and 20 fps). TURN: rotate by 90° plus the followed weld's last
+heading estimate (the crossing weld is perpendicular to the weld, not to the robot: a 1°
+heading left the look-ahead point 150 mm·sin 1.7° ≈ 4.4 mm off the new weld after the turn) —
+the last within `square_deg` of the robot's heading: a tracker that restarts on the bar near
+the T reports it ≈ 90° off (Figure 22, glare, one run at `6826bfa`: an 88° estimate at
+confidence 0.21, twenty frames before the turn, took the turn to 100° and left the look-ahead
+point 22.8 mm off the new weld; the robot keeps the weld within a few degrees, so a larger
+heading is not the followed weld's) — ± (`turn_direction` +1 left/CCW, −1 right) in place
+(turn_radius_mm = 0) or on an arc; the turned angle is integrated from the commanded ω, or from
+the measured heading when the caller passes it → FOLLOW, ignoring junction sightings for
+`junction_ignore_mm` of travel. The turn ends on the crossing weld as the stripe sees it: once
+the observed offset e (confident, the weld about square) puts the rest of the turn,
 `turn_direction` · atan(e / `lookahead_mm`), within `turn_finish_deg` of the odometric rest,
 that is the rest (`_finish_on_weld`), so the look-ahead point lands on the new weld whatever
-the stop position and the followed weld's heading estimate left. The error after the turn
-is largest on its first frame and decays from there with the look-ahead's time constant
-(FOLLOW above); the odometric end left it 1.44 mm at Figure 22's dev seed 2201 in glare:
-0.92 mm of stop past the bar's centre line plus 150 mm · tan 0.20° of heading estimate.
+the stop position and the followed weld's heading estimate left. The error after the turn is
+largest on its first frame and decays from there with the look-ahead's time constant (FOLLOW
+above); the odometric end left it 1.44 mm at Figure 22's dev seed 2201 in glare: 0.92 mm of
+stop past the bar's centre line plus 150 mm · tan 0.20° of heading estimate.
 
 Pure Python; no I/O.
 """
@@ -146,6 +146,18 @@ class ControllerConfig:
     # a weld heading beyond this (deg, from the robot's) is not the followed weld's: it
     # neither sets the turn's extra angle nor ends a turn (module docstring, TURN)
     square_deg: float = 15.0
+    # APPROACH_JUNCTION: once the junction x_j is nearer than `lookahead_mm` + this, the
+    # horizontal stripe lies beyond the stem's end (at the bar or past it) and its offset is not
+    # the followed weld's unless it keeps to the stem's line as last confidently observed,
+    # dead-reckoned by the commands (`stem_gate_mm`; module docstring); ≈ the bar's half width.
+    # Found on a projector rolled 25° (`experiments/closed_loop_roll.py`), whose leaning stripe
+    # crosses the bar obliquely: the tracker took pieces of the bar for the stem and reported
+    # offsets of −250 … +550 mm, confident enough to steer
+    stem_end_mm: float = 10.0
+    # … and there an offset further than this from that line is ignored (the robot goes
+    # straight, dead-reckoning); the tracker's own prediction, which follows the same line,
+    # passes
+    stem_gate_mm: float = 3.0
 
     def __post_init__(self):
         if self.turn_direction not in (-1, 1):
@@ -200,6 +212,9 @@ class PathController:
         self.turned = 0.0
         self._turn_start_heading: float | None = None
         self._weld_heading = 0.0  # last finite heading of the followed weld, rad
+        # the followed weld's line (offset mm, heading rad) at the last confident observation,
+        # dead-reckoned since by the commands (`stem_end_mm`)
+        self._stem_line: tuple[float, float] | None = None
         self._junction_y = 0.0  # y_r where the junction sightings are taken, mm
         self._predicted = 0.0  # v·dt taken off x_j at the last update (`travelled_mm`)
         self._turn_angle = math.pi / 2
@@ -282,6 +297,10 @@ class PathController:
         if not (dt > 0 and math.isfinite(dt)):
             raise ValueError(f"dt must be positive and finite, got {dt}")
         c = self.config
+        if self._stem_line is not None:  # the last command's motion (e' = e + dθ − Lδ)
+            e, th = self._stem_line
+            d, delta = self.v * dt, self.omega * dt
+            self._stem_line = (e + d * math.tan(th) - c.lookahead_mm * delta, th - delta)
         confidence = _finite(confidence)
         seen_offset = math.isfinite(offset_mm) if offset_mm is not None else False
         scale = _clip(
@@ -334,6 +353,7 @@ class PathController:
                 self.turns_completed += 1
                 self.junction_x = None
                 self._stray = []
+                self._stem_line = None
                 v_t, w_t = 0.0, 0.0
             else:
                 # slow down near the end so the angle does not overshoot: |ω| ≤ √(α θ') with θ'
@@ -351,6 +371,19 @@ class PathController:
             self._advance_junction(v, dt)
             return self._emit(v, w)
 
+        past_stem = (
+            self.state is State.APPROACH_JUNCTION
+            and self.junction_x is not None
+            and self.junction_x < c.lookahead_mm + c.stem_end_mm
+        )
+        if seen_offset and scale > 0.0 and not past_stem and self.state is not State.TURN:
+            self._stem_line = (float(offset_mm), math.radians(_finite(h, 0.0)))
+        if past_stem and seen_offset:
+            # the stripe is beyond the stem's end: an offset that leaves the stem's line as
+            # last confidently observed (dead-reckoned) is not the followed weld's
+            line = self._stem_line
+            if line is None or abs(float(offset_mm) - line[0]) > c.stem_gate_mm:
+                seen_offset = False
         if self.state is State.APPROACH_JUNCTION and (not seen_offset or scale <= 0.0):
             # The horizontal stripe runs 150 mm ahead: near the T it has passed the end of
             # the followed weld and sees no bead. Expected: go straight, dead-reckoning on

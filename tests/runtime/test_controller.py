@@ -261,6 +261,26 @@ def test_approach_dead_reckons_over_measured_plate_and_turns():
     assert ctrl.state is State.FOLLOW and ctrl.v == 0.0
 
 
+def test_offsets_past_the_stem_do_not_steer_the_approach():
+    """Once the junction is nearer than the look-ahead plus `stem_end_mm`, the horizontal
+    stripe lies beyond the stem's end: an offset far off the stem's last confident line
+    (pieces of the bar, as a rolled projector's leaning stripe sees them) must not turn the
+    robot; one that keeps to that line (the tracker's own prediction) still steers, and before
+    that point any confident offset does."""
+    c = ControllerConfig()
+    far = c.lookahead_mm + c.stem_end_mm + 80.0  # (_approaching drives ≈ 20 mm on)
+    for x_j, offset, steers in (
+        (far, 40.0, True),
+        (c.lookahead_mm, 40.0, False),
+        (c.lookahead_mm, 1.0, True),
+    ):
+        ctrl = PathController(c)
+        _approaching(ctrl, junction_x=x_j)  # on the line: offset 0, heading 0
+        cmd = ctrl.update(0.05, offset, 0.0, 0.9, sensor_ok=True)
+        assert ctrl.state is State.APPROACH_JUNCTION
+        assert (abs(cmd.omega_rad_s) > 1e-3) is steers, (x_j, offset)
+
+
 def test_turn_pauses_when_blind():
     c = ControllerConfig()
     ctrl = PathController(c)
