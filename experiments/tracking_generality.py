@@ -102,9 +102,11 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   frames without a bead and the 25–39 mm beads above, not the reference point).
   Since changed: bands that follow a leaning stripe (`cslx.runtime.band_lean`, its
   docstring has the runs: seed 7400, 32 frames, the rolled runs in the bands on 87.5–96.9 %
-  of frames instead of 0 %, accuracy within the run-to-run scatter, base identical). Not
-  changed: the controller's look-ahead (`ControllerConfig.lookahead_mm`, x_ref), 8–21 mm
-  short of where a rolled stripe reports the offset.
+  of frames instead of 0 %, accuracy within the run-to-run scatter, base identical), and
+  the controller's look-ahead, now where the stripe crosses the robot's axis
+  (`Tracker.lookahead_mm`, 155–167 mm at 8–25°); the closed loop on a rolled rig is
+  `experiments.closed_loop_roll` (its docstring: a 25° roll failed past the stem's end until
+  `ControllerConfig.stem_gate_mm`).
 
 Run with ``python -m experiments.tracking_generality --seed 7400 --frames 32
 [--condition NAME …] [--nuisance N …] --out DIR``. Seeds: fresh ones (7400+), never the
