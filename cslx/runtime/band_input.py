@@ -152,6 +152,22 @@ def _fill(rgb, I, clip, weights, axis: int, dome: tuple, margin: int = 0):
     return one_function(domed, I, clip, white)
 
 
+def _fill_inputs(sub, axis: int, weights, dtype, dome: tuple):
+    """(cut, colour image, clipped mask, dome) of a band's uint8 cut with the fill's axis
+    leading. For a band of columns (axis 1) the fill scans along the rows' axis with the
+    columns leading: the uint8 cut is transposed once (and the finished band once), rather
+    than the colour image, the mask and the fill's four flank arrays (the same values;
+    480×128 band 2.04 → 1.38 ms, 400 interleaved calls, load 6, issue 13); the colour image
+    and the mask are taken on the cut as it lies and transposed (module notes), and the
+    dome's heights swapped (the fill along the transposed axis 0 is the frame's axis 1)."""
+    I, clip = colour_sum(sub, weights, dtype), clipped_mask(sub)
+    if axis == 1:
+        I, clip = I.T, clip.T
+        sub = jnp.transpose(sub, (1, 0, 2))
+        dome = (dome[1], dome[0], *dome[2:]) if dome else dome
+    return sub, I, clip, dome
+
+
 def band_image(
     rgb: UInt8[Array, "h w 3"],
     start,
@@ -195,21 +211,7 @@ def band_image(
         )
     if not fill:
         return _sub_band(colour_sum(sub, weights, dtype), start - o0, size, axis)
-    if axis == 1:
-        # The fill scans along the rows' axis with the columns leading: transpose the uint8
-        # band once and the finished band once, rather than the colour image, the mask and
-        # the fill's four flank arrays (the same values; 480×128 band 2.04 → 1.38 ms,
-        # 400 interleaved calls, load 6, issue 13).
-        # the fill along the transposed band's axis 0 is the frame's axis 1: swap the heights
-        # The colour image and the mask are taken on the cut as it lies and transposed
-        # (module notes).
-        I = colour_sum(sub, weights, dtype).T
-        clip = clipped_mask(sub).T
-        sub = jnp.transpose(sub, (1, 0, 2))
-        dome = (dome[1], dome[0], *dome[2:]) if dome else dome
-    else:
-        I = colour_sum(sub, weights, dtype)
-        clip = clipped_mask(sub)
+    sub, I, clip, dome = _fill_inputs(sub, axis, weights, dtype, dome)
 
     def cut(x):
         return _sub_band(x, start - o0, size, 0)
@@ -277,12 +279,9 @@ def sheared_band(
     rows = jnp.clip(rows, 0, n - 1)  # (outer, N)
     if axis == 0:
         sub = jnp.take_along_axis(rgb, rows[:, :, None], axis=0)  # (outer, W, 3)
-        I, clip = colour_sum(sub, weights, dtype), clipped_mask(sub)
     else:
         sub = jnp.take_along_axis(rgb, rows.T[:, :, None], axis=1)  # (H, outer, 3)
-        I, clip = colour_sum(sub, weights, dtype).T, clipped_mask(sub).T
-        sub = jnp.transpose(sub, (1, 0, 2))
-        dome = (dome[1], dome[0], *dome[2:]) if dome else dome
+    sub, I, clip, dome = _fill_inputs(sub, axis, weights, dtype, dome)
     if fill:  # the fill's scans stop at the band's far edge (``margin``, as in `band_image`)
         I = lax.cond(
             jnp.any(clip),
