@@ -201,6 +201,39 @@ earlier 35° development seeds 7500–7515, other rigs): roll45/clean H 93.95 �
 95.84, 0 → 0, 0.038 / 0.177 → 0.042 / 0.195 (worse); roll20/clean identical. Open: the
 saturated 35° vertical stripe (its first pass at 29° from the axis) loses ≈ 1 % detection
 and 0.004 mm median when oriented; a 45° saturated stripe's ends and border cost 3–5 %.
+
+The turned cross at the border (branch cross45s, `cslx.segmentation.border`). Where the 45°
+detection is lost (development seeds 7583–7585 = `--seed 7560`, frames 0–7, by region): 76–
+100 % of the lost centres lie within 12 px of the border across (clean H 37 of 38, V 39 of 46;
+sunny H 51 of 59, V 55 of 77; saturated H 102 of 121, V 119 of 124), the rest at the fans'
+ends inside the frame (H 1–19), the border along (V 5–15) and clipped pixels (V 5–7); none at
+the crossing. The cut profile and its mirror merge into one ridge on the border, so the
+first pass has no candidate there. The ends that leave the frame across are now set by a
+quadratic through the centres further inside, up to the border, while the image is lit.
+Before → after, same process and frame order (detection %, gross count, false positives,
+median / p95 mm), frames 0–7: roll45/clean (7583) H 98.93 → 99.92, 0 → 0, 2 → 2, 0.0369 /
+0.199 → 0.0369 / 0.198; V 98.38 → 99.48, 2 → 2, 0 → 0, 0.0326 / 0.141 → 0.0330 / 0.144;
+roll45/sunny (7584) H 98.33 → 99.83, 0 → 0, 2 → 2, 0.0408 / 0.228 → 0.0427 / 0.242; V 97.16
+→ 98.75, 0 → 0, 0.0398 / 0.276 → 0.0399 / 0.283; roll45/saturated (7585) H 96.55 → 99.49, 0 →
+2, 6 → 8, 0.0392 / 0.286 → 0.0405 / 0.312; V 95.35 → 99.81, 0 → 0, 0.0375 / 0.220 → 0.0380 /
+0.228; roll20/clean (7575): identical; roll35/sunny (7576) H 98.92 → 99.76, 0 → 0, 0.0316 /
+0.148 → 0.0319 / 0.160; V 98.40 → 99.78, 0 → 5, fp 0 → 2, 0.0267 / 0.140 → 0.0260 / 0.136;
+roll35/saturated (7577) H 97.43 → 99.87, 5 → 5, fp 16 → 18, 0.0353 / 0.194 → 0.0355 / 0.204;
+V 95.84 → 97.84, 5 → 11, fp 0 → 4, 0.0338 / 0.152 → 0.0343 / 0.174. Development benchmark
+(18 conditions, seeds 7100–7117, frame 0, both stripes): all 36 frame-stripes bit-identical.
+Held out (once, at the end: `--seed 7400`, roll45 seeds 7423–7425, frames 0–3): clean H 98.91
+→ 99.83, 0 → 0, 0.0371 / 0.185 → 0.0370 / 0.196; V 98.48 → 99.85, 0 → 2, 0.0287 / 0.218 →
+0.0278 / 0.216; sunny H 98.72 → 99.66, 0 → 0, fp 2 → 3, 0.0520 / 0.238 → 0.0526 / 0.237; V
+94.69 → 97.96, 0 → 8, 0.0335 / 0.264 → 0.0353 / 0.297; saturated H 97.04 → 99.94, 0 → 0, fp
+6 → 4, 0.0438 / 0.314 → 0.0467 / 0.337; V 95.41 → 99.85, 0 → 0, 0.0325 / 0.138 → 0.0356 /
+0.156. Cost: `border.extend` 1.8–6.8 ms a stripe on host arrays (median, load ≈ 8; the images
+come to the host only for a qualifying end, 0.1 ms). Tried: a straight line (clean V frames 3
+and 7: 17 gross centres, the lens bends the stripe near the border); a quadratic without
+the check against the path's own centres nearer the border (roll35/saturated V: 15–17 gross
+a frame across a surface corner); `FIT_WIDTHS` 1.0 (the same). Open: the gross centres the
+extension still adds on some frames (roll35 V, held-out sunny V), the extrapolation's
+slightly higher errors (medians +0–0.003 mm), and the rest of the misses (fans' ends,
+the border along, clipped pixels).
 """
 
 from __future__ import annotations

@@ -370,11 +370,14 @@ def _one_image(path, rgb, stripes, method, space, sigma, sensor, out, stats, rec
         kw = {} if method in ("cm", "la", "qa", "aa") else {"sigma": sigma}
         try:
             if method == "linked":  # needs the RGB frame (clipped pixels)
+                from ..segmentation.orient import stripe_angle
                 from ..segmentation.robust import search_space_unclipped
 
                 weights = space
                 if space == "auto":
                     weights = search_space_unclipped(rgb, 0 if stripe == "h" else 1)
+                if sensor is not None and sensor.planes.shape[0] == 2:  # which is which
+                    kw["stripe_deg"] = stripe_angle(sensor, stripe)
                 centres = extract(rgb, method, space=weights, stripe=stripe, **kw)
             else:
                 mono, weights = monochrome_for(rgb, space, stripe)

@@ -45,7 +45,9 @@ __all__ = [
     "direction_histogram",
     "drop_other",
     "peak_angles",
+    "plane_angle",
     "search_slope",
+    "stripe_angle",
     "smooth_along",
 ]
 
@@ -82,22 +84,48 @@ def direction_histogram(img):
     return jax.ops.segment_sum(weight.reshape(-1), idx.reshape(-1), 180)
 
 
-def search_slope(img) -> tuple[float | None, float | None]:
-    """(slope, other): the slope (px across per px along) of the stripe nearest the search
-    axis in `img` (search orientation: axis 1 along, axis 0 across), None where it is
-    within `MIN_DEG` of the axis or no peak is found (module docstring); and the slope of
-    the strongest other peak (the other stripe of the cross), None where there is none."""
+def search_slope(
+    img, prefer: int = 1, expected: float | None = None
+) -> tuple[float | None, float | None]:
+    """(slope, other): the slope (px across per px along) of this stripe in `img` (search
+    orientation: axis 1 along, axis 0 across), None where it is within `MIN_DEG` of the
+    axis or no peak is found; and the slope of the strongest other peak (the other stripe of
+    the cross), None where there is none. Which peak is this stripe: `peak_angles`
+    (`prefer`: +1 for "h", −1 for "v"; `expected`: the calibration's angle, `plane_angle`)."""
     hist = np.asarray(direction_histogram(img), float)
-    angle, other = peak_angles(hist)
+    angle, other = peak_angles(hist, prefer, expected)
     if angle is None or abs(angle) < MIN_DEG:
         return None, None
     slopes = [None if a is None else math.tan(math.radians(a)) for a in (angle, other)]
     return float(np.clip(slopes[0], -MAX_SLOPE, MAX_SLOPE)), slopes[1]
 
 
-def peak_angles(hist: np.ndarray) -> tuple[float | None, float | None]:
-    """The angles (degrees) of the histogram's significant peak nearest 0 and of the
-    strongest other peak at least 20° from it (module docstring); None where absent."""
+#: Two peaks whose distances to the search axis differ by less than this (degrees) are a
+#: tie (`peak_angles`): a cross turned by ≈ ±45°. The h and v searches measure a stripe's
+#: angle alike to ≈ 0.01° (rig "roll-45", seed 7590, frames 0–1: h −41.10 / 43.53°, v
+#: −48.90 / 46.47° from the y axis); the rigs' own separations: 2.7° (roll −45°: −41.1 and
+#: 43.5°), 3.5° (roll +45°: 46.5 and −50°), both kept by nearness.
+TIE_DEG = 1.0
+
+
+def peak_angles(
+    hist: np.ndarray, prefer: int = 1, expected: float | None = None
+) -> tuple[float | None, float | None]:
+    """The angles (degrees) of this stripe's significant peak and of the strongest other
+    peak at least 20° from it (module docstring); None where absent.
+
+    Which stripe is "h" (laser plane 0) and which "v" (docs/contracts.md, "Stripes"): with
+    the calibration's `expected` angle (`plane_angle`, the stripe of that plane on a wall
+    facing the camera), the peak nearest it. Without: the peak nearest the search axis (h:
+    the stripe nearer the image's x axis, v: the one nearer its y axis); where two peaks'
+    distances to the axis differ by less than `TIE_DEG` and both are at least `MIN_DEG` (a
+    cross turned by ≈ ±45°, where that nearness is noise), the one whose angle has the sign
+    `prefer` (+1 for "h", −1 for "v"). "h" is then the stripe that falls to the right in
+    the image (v grows with u) and "v" the one that rises, in both searches (a stripe at
+    +45° from the x axis is at +45° from the y axis in the transposed search, one at −45°
+    at −45°), so the two are never the same stripe. That is the plane order of a projector
+    turned by +45° (`cslx.sensor.rig.cross_projector_planes(roll_deg=45)`); one turned by
+    −45° needs the calibration (`cslx extract --calib` passes it)."""
     k = np.arange(-6, 7)
     g = np.exp(-0.5 * (k / 2.0) ** 2)
     smooth = sum(gi * np.roll(hist, -ki) for ki, gi in zip(k, g, strict=True))
@@ -110,10 +138,38 @@ def peak_angles(hist: np.ndarray) -> tuple[float | None, float | None]:
     cand = np.flatnonzero(peaks)
     if cand.size == 0:
         return None, None
-    i = cand[np.argmin(np.abs(angles[cand]))]
+    fine = np.array([_refine(hist, angles, c) for c in cand])
+    if expected is not None:
+        i = cand[np.argmin(np.abs((fine - expected + 90) % 180 - 90))]
+    else:
+        i = cand[np.argmin(np.abs(angles[cand]))]
+        dist = np.abs(fine)
+        tie = (dist >= MIN_DEG) & (dist <= dist[cand == i][0] + TIE_DEG)
+        mine = tie & (np.sign(fine) == prefer)
+        if dist[cand == i][0] >= MIN_DEG and mine.any() and (tie & ~mine).any():
+            i = cand[mine][np.argmin(dist[mine])]
     far = cand[np.abs((angles[cand] - angles[i] + 90) % 180 - 90) >= 20]
     j = far[np.argmax(smooth[far])] if far.size else None
     return _refine(hist, angles, i), None if j is None else _refine(hist, angles, j)
+
+
+def plane_angle(plane, fx: float, fy: float, axis: int) -> float:
+    """The search-orientation angle (degrees, `direction_histogram`'s convention) of the
+    stripe of laser `plane` (a, b, c: a x + b y + c z + 1 = 0, camera frame) on a wall
+    facing the camera: there a x_n + b y_n = const in normalised coordinates (any depth), so
+    in pixels the stripe runs along (b / fy, −a / fx); lens distortion is left out. `axis`
+    0 for "h" (the angle to the image x axis), 1 for "v" (to the y axis, transposed)."""
+    a, b = float(plane[0]), float(plane[1])
+    phi = math.degrees(math.atan2(-a / fx, b / fy))  # from x, positive towards +v
+    theta = phi if axis == 0 else 90.0 - phi
+    return (theta + 90.0) % 180.0 - 90.0
+
+
+def stripe_angle(sensor, stripe: str) -> float:
+    """`plane_angle` of a two-plane calibration's stripe "h" (plane 0) or "v" (plane 1)."""
+    axis = 0 if stripe == "h" else 1
+    cam = sensor.camera
+    return plane_angle(np.asarray(sensor.planes)[axis], float(cam.fx), float(cam.fy), axis)
 
 
 def _refine(hist, angles, i) -> float:

@@ -137,6 +137,10 @@ averages out): the goal's median is near that floor even without speckle.
    (σ ≤ 0.33 px, strength ≥ 12, over half the columns) or a strong one (strength ≥ 60,
    σ ≤ 1.5 px: a turned cross's first pass is rough); no laser-on development frame
    changes (bit-identical).
+9. The border (`cslx.segmentation.border`, `BORDER`): a turned stripe's ends that leave the
+   frame across the search axis are set by a quadratic through the centres further inside,
+   up to the border, while the image there is lit (a rolled cross lost 4–16 centres a frame
+   and stripe there); aligned stripes are untouched (development benchmark bit-identical).
 Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """
 
@@ -151,7 +155,7 @@ import numpy as np
 from jax import lax
 
 from ..config import CLIP_LEVEL, SIGMA_MAX
-from . import chroma, crossing, ends, orient, presence
+from . import border, chroma, crossing, ends, orient, presence
 from .clipped import MAX_RUN, clipped_mask, fill_clipped, white_mask
 from .path import smooth_path
 from .refine import second_pass
@@ -300,6 +304,7 @@ def linked_extract(
     clip_level: float = CLIP_LEVEL,
     k: int = 4,
     params: LinkParams = LinkParams(),
+    stripe_deg: float | None = None,
 ) -> Centres:
     """Centres of one stripe by the robust method (module docstring).
 
@@ -312,6 +317,9 @@ def linked_extract(
         clip_level: channel value treated as clipped (RGB input only).
         k: candidate ridges per column/row.
         params: the path cost weights (`LinkParams`).
+        stripe_deg: the calibration's angle of this stripe in search orientation
+            (`orient.plane_angle`): which of a turned cross's stripes is this one; None: the
+            rule of `orient.peak_angles`.
 
     Returns:
         `Centres` with `sigma` (predicted std, px) and `saturated` flags.
@@ -348,16 +356,21 @@ def linked_extract(
     first = SIGMA0 if sigma is None else float(sigma)
     final = first
     # a stripe turned far from its axis: smoothed and linked along it (`orient`)
-    slope, other = orient.search_slope(mono if axis == 0 else mono.T) if ORIENT else (None,) * 2
+    slope, other = (
+        orient.search_slope(mono if axis == 0 else mono.T, 1 - 2 * axis, stripe_deg)
+        if ORIENT
+        else (None, None)
+    )
     kw = dict(axis=axis, k=k, params=params, sigma_along=sa, slope=slope)
     if slope is not None:  # computed once for both passes
         kw["along"] = orient.smooth_along(mono.T if axis == 0 else mono, slope, sigma=sa)
     c, width = linked_centres(mono, sigma=first, **kw)
+    width_final = width
     if sigma is None:
         # The first pass at the floor σ is final unless the measured width asks for more.
         final = stripe_sigma(width, min(mono.shape))
         if final != first:
-            c, _ = linked_centres(mono, sigma=final, **kw)
+            c, width_final = linked_centres(mono, sigma=final, **kw)
     if slope is not None and DROP_OTHER:
         v = orient.drop_other(c.pos, c.valid, slope, other)
         v = jnp.asarray(orient.trim_ends(v, c.strength) if TRIM_ENDS else v)
@@ -387,8 +400,13 @@ def linked_extract(
             pos = pos + weight * p if len(signals) > 1 else p
     if presence.NO_STRIPE_SIGMA is not None:  # step 8
         pos, valid, sig, sat = presence.absent(pos, valid, sig, c.strength, sat)
+    strength = c.strength
+    if BORDER:  # step 9
+        w = np.asarray(width_final)[np.isfinite(np.asarray(width_final))]
+        t = math.hypot(final, float(np.median(w)) if w.size else 0.0)
+        pos, valid, sig, strength = border.extend(pos, valid, sig, strength, mono2, blind, t, axis)
     return c._replace(
-        pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, c.strength, 0.0), saturated=sat
+        pos=pos, valid=valid, sigma=sig, strength=jnp.where(valid, strength, 0.0), saturated=sat
     )
 
 
@@ -433,6 +451,8 @@ def _finish(pos, valid, sigma, filled, blind, *, axis: int, trim: bool = False):
 REFINE = True
 #: Interpolate centres at a turned crossing or cut by the border; drop border ones (`crossing`).
 CROSSING = EDGE_DROP = True
+#: Set a turned stripe's centres near the border it leaves the frame by by its line (`border`).
+BORDER = True
 #: Drop the first pass's tail past a turned stripe's end inside the frame (`ends`), step 5.
 END_TRIM = True
 #: Smooth and link a stripe turned ≥ `orient.MIN_DEG` from its axis along it (`orient`), step 3.

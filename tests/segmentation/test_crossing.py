@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from cslx.segmentation import extract
-from cslx.segmentation.crossing import EDGE, inside, interpolated, other_stripe
+from cslx.segmentation.crossing import inside, interpolated, other_stripe
 
 H, W = 120, 200  # the frame of tests/segmentation/test_robust.py: shared programs
 
@@ -82,11 +82,12 @@ def test_stripe_leaving_the_frame_sideways_gives_no_centres_on_the_border():
     img = img + rng.normal(0, 2.0, img.shape)
     c = extract(img, "linked", stripe="v")
     pos, valid = np.asarray(c.pos), np.asarray(c.valid)
-    # no centre where the stripe is outside the frame (the border's own ridge), none
-    # within EDGE of the border, and the last ones inside (cut profiles) not pulled off
+    # no centre where the stripe is outside the frame (the border's own ridge), and the
+    # last ones inside (cut profiles) not pulled off: those within EDGE of the border, which
+    # `inside` drops, come back from the fit through the centres inside (`border`)
     assert not valid[u_true > w - 1].any()
-    assert np.all(np.asarray(inside(pos[valid], w)))
-    assert pos[valid].max() < w - 1 - EDGE
+    assert pos[valid].max() <= w - 1
     ok = valid & (u_true < w - 1)
     assert np.abs(pos - u_true)[ok].max() < 0.3
-    assert ok.sum() >= np.sum(u_true < w - 4) - 2
+    assert ok.sum() >= np.sum(u_true < w - 1) - 1
+    assert not np.all(np.asarray(inside(pos[valid], w)))  # rows within EDGE: found

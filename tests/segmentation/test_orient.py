@@ -95,3 +95,42 @@ def test_trim_ends_cuts_a_tail_below_half_the_plateau_strength():
     valid[190:] = False
     kept = orient.trim_ends(valid, z)
     assert not kept[:10].any() and kept[10:190].all() and not kept[190:].any()
+
+
+def test_a_cross_turned_about_45_degrees_keeps_h_and_v_under_a_small_turn():
+    # Nearer the axis alone flips "h" between the stripes when a ±45° cross turns by 0.6°;
+    # within TIE_DEG, "h" is the stripe falling to the right (positive angle) and "v" the
+    # rising one, in both searches (`orient.peak_angles`).
+    rng = np.random.default_rng(34)
+    for a_pos, a_neg in ((45.3, -44.7), (44.7, -45.3)):
+        img, _ = _cross(rng, a_pos, a_neg, noise=1.0)
+        h, _ = orient.peak_angles(np.asarray(orient.direction_histogram(img)), 1)
+        v, _ = orient.peak_angles(np.asarray(orient.direction_histogram(img.T)), -1)
+        assert abs(h - a_pos) < 1.5  # the stripe at +45 from the x axis
+        assert abs(v - (-90.0 - a_neg)) < 1.5  # the one at −45: −45 from the y axis
+    # outside the tie the nearer stripe wins, whatever `prefer` says
+    img, _ = _cross(rng, 40.0, -50.0, noise=1.0)
+    h, _ = orient.peak_angles(np.asarray(orient.direction_histogram(img)), -1)
+    assert abs(h - 40.0) < 1.5
+
+
+def test_the_calibration_says_which_stripe_is_which():
+    from cslx.sensor.rig import TABLE4_K, cross_projector_planes
+
+    # the projector of experiments.ood_extraction's rig "roll-45" (offset turned with it)
+    c, s = math.cos(math.radians(-45)), math.sin(math.radians(-45))
+    planes = cross_projector_planes(
+        origin=(-60.0 * (c - s), -60.0 * (s + c), 0.0), target=(40 * c, 40 * s, 230.0),
+        roll_deg=-45.0,
+    )  # fmt: skip
+    fx, fy = TABLE4_K[0][0], TABLE4_K[1][1]
+    # rendered frames of that rig (seed 7590, frames 0-1): h at -41.1 / -40.8°, v at
+    # 46.5 / 46.1° from the y axis (the direction histogram)
+    assert abs(orient.plane_angle(planes[0], fx, fy, 0) + 40.95) < 0.8
+    assert abs(orient.plane_angle(planes[1], fx, fy, 1) - 46.3) < 0.8
+    # with it, a tied cross's stripe is the one the calibration expects, against the rule
+    rng = np.random.default_rng(35)
+    img, _ = _cross(rng, 45.3, -44.7, noise=1.0)
+    hist = np.asarray(orient.direction_histogram(img))
+    assert abs(orient.peak_angles(hist, 1)[0] - 45.3) < 1.5
+    assert abs(orient.peak_angles(hist, 1, expected=-40.7)[0] + 44.7) < 1.5

@@ -1,0 +1,153 @@
+"""A turned stripe leaving the frame across its search axis: centres up to the border.
+
+A stripe turned against the image axes (a rolled cross) leaves the frame across its search
+axis: a 45° horizontal stripe meets the top or bottom border, and its last columns' profiles
+are cut there. The smoothing across (σ, symmetric padding) merges the cut profile with its
+mirror image into one ridge on the border, so the first pass has no candidate for the last
+σ_t or so (saturated, σ 6: the 6–12 px next to the border), and `crossing` drops what is
+within `crossing.EDGE` of it and interpolates what is within `crossing.CUT_WIDTHS` σ_t.
+Diagnosis (rig roll45 of `experiments.ood_extraction`, development seeds 7583–7585, frames
+0–7, both stripes; misses and gross centres by region): of 35–136 lost centres a condition
+and stripe, 76–100 % lay within 12 px of the border across (clean H 37 of 38, V 39 of 46;
+saturated H 102 of 121, V 119 of 124), the rest at the fan's ends inside the frame (H, 1–19),
+on the border along (V, 0–15) and on clipped pixels (V sunny / saturated, 5–7).
+
+`extend` sets, at each end of the path, the centres closer than `FIT_WIDTHS` σ_t + `FIT_PX`
+to the border across (σ_t from the final pass's σ and measured width) by a quadratic
+(`FIT_DEG`: the lens bends a stripe near the border; a line left clean V frames 3 and 7
+0.5–1.5 px off over 25 rows, 17 gross centres) through the next `FIT_LEN` centres inside,
+out to the border (`MARGIN`), where:
+- the fit's slope is at least `MIN_SLOPE` (the stripe meets the border obliquely; an aligned
+  stripe's ends are left alone, so the default rig's frames do not change);
+- the fit meets the border within `REACH` × that distance of its support (a path ending far
+  from the border is a fan's end, `ends` and `orient.trim_ends` handle those);
+- the path's own centres nearer the border lie within `ZONE_TOL` px of the fit (median): a
+  surface corner between the support and the border (roll35/saturated V, seed 7577, frames
+  1, 3 and 7: slope 0.75 inside, 0.52 beyond row 61) put the extrapolation 1–3.4 px off, 15–17
+  gross centres a frame; the gate leaves such an end as it was (0.5 px caught two of the three
+  frames);
+- each centre's image (bilinear, the second pass's monochrome image) is at least
+  `LIT_SHARE` × the support's median, or a clipped pixel left unfilled (a clipped run that
+  touches the border has no second flank to fill it from: a hole in R − G); the first dark
+  one ends the stripe (its fan ends before the border), and path centres beyond are dropped.
+The centres set keep their σ where larger, else the path's median σ; new ones get the
+path's median strength.
+
+Evidence: the module docstring of `experiments/ood_extraction.py`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["FIT_WIDTHS", "MIN_SLOPE", "extend"]
+
+#: Centres closer than `FIT_WIDTHS` σ_t + `FIT_PX` (px across) to the border are replaced by
+#: the line through the path's centres beyond that distance (`FIT_LEN` of them).
+FIT_WIDTHS = 2.5
+FIT_PX = 2.0
+FIT_LEN = 30
+FIT_DEG = 2
+#: Largest median distance (px) of the path's own centres nearer the border from the fit.
+ZONE_TOL = 0.3
+#: Smallest |slope| (px across per centre) of that line: a stripe that meets the border
+#: obliquely (`crossing.MIN_SLOPE`).
+MIN_SLOPE = 0.22
+#: An extrapolated centre needs the image at it ≥ `LIT_SHARE` × the median at the support's
+#: centres (the stripe is there, not past its fan's end).
+LIT_SHARE = 0.5
+#: The line must meet the border within `REACH` × that distance (px across) of the support.
+REACH = 2.0
+#: The line is followed while it lies at least `MARGIN` px inside the image across.
+MARGIN = 0.0
+
+
+def _sample(img, j, p):
+    """img[j, p] (axis 0 along, axis 1 across) by linear interpolation across (clamped)."""
+    m = img.shape[1]
+    p = np.clip(p, 0.0, m - 1.0)
+    i0 = np.clip(np.floor(p).astype(int), 0, m - 2)
+    f = p - i0
+    return img[j, i0] * (1 - f) + img[j, i0 + 1] * f
+
+
+def _end(pos, valid, img, clipped, img_shape, width, reverse: bool):
+    """(indices, positions) of the centres set by the line at one end of the path, or None."""
+    n, m = len(pos), img_shape[1]
+    order = np.arange(n)[::-1] if reverse else np.arange(n)
+    idx = order[valid[order]]
+    d = FIT_WIDTHS * width + FIT_PX
+    p = pos[idx]
+    k = np.flatnonzero((p >= d) & (p <= m - 1 - d))
+    if k.size < FIT_LEN:
+        return None
+    support = idx[k[:FIT_LEN]]
+    b = np.polyfit(support, pos[support], 1)[0]
+    if abs(b) < MIN_SLOPE:
+        return None
+    coef = np.polyfit(support - support[0], pos[support], FIT_DEG)
+    zone = idx[: k[0]]  # the path's own centres between the support and the border
+    if zone.size >= 3:
+        off = np.median(np.abs(pos[zone] - np.polyval(coef, zone - support[0])))
+        if off > ZONE_TOL:
+            return None  # a corner between: the fit does not carry over (module docstring)
+    step = -1 if reverse else 1
+    reach = int(np.ceil((REACH * d + 1.0) / abs(b))) + 1  # centres to the border, at most
+    q_out = np.polyval(coef, -step * reach)
+    if 0 <= support[0] - step * reach < n and 0 <= q_out <= m - 1:
+        return None  # the line does not meet the border across within the reach
+    img, clipped = img(), clipped()  # only now on the host (a turned stripe at the border)
+    plateau = np.median(_sample(img, support, pos[support]))
+    js, qs = [], []
+    j = support[0] - step
+    while 0 <= j < n:
+        q = np.polyval(coef, j - support[0])
+        if q < MARGIN or q > m - 1 - MARGIN:
+            break  # left the frame across
+        lit = _sample(img, np.array([j]), np.array([q]))[0] >= LIT_SHARE * plateau
+        if not (lit or clipped[j, int(np.clip(round(q), 0, m - 1))]):
+            break  # the fan's end near the border
+        js.append(j)
+        qs.append(q)
+        j -= step
+    if not js:
+        return None
+    return np.array(js), np.array(qs)
+
+
+def extend(pos, valid, sigma, strength, img, clipped, width, axis: int = 1):
+    """(pos, valid, sigma, strength) with the path's ends that leave the frame across the
+    search axis set by the fit through the centres further inside, up to the border
+    (module docstring). `img` (H, W): the monochrome image; `clipped` (H, W): its clipped
+    pixels left unfilled; `width`: σ_t (px); `axis` 0 for "h" (one centre per column), 1
+    for "v". Both images come to the host only where an end qualifies."""
+    pos = np.array(pos, float)
+    valid = np.array(valid, bool)
+    sigma = np.array(sigma, float)
+    strength = np.array(strength, float)
+    host = {}
+
+    def on_host(name, x, dtype):
+        if name not in host:  # search orientation: axis 0 along the stripe
+            host[name] = np.asarray(x, dtype).T if axis == 0 else np.asarray(x, dtype)
+        return host[name]
+
+    images = (lambda: on_host("img", img, float), lambda: on_host("clip", clipped, bool))
+    shape = np.shape(img)[::-1] if axis == 0 else np.shape(img)
+    if valid.sum() < 2 * FIT_LEN:
+        return pos, valid, sigma, strength
+    z = float(np.median(strength[valid]))
+    s = float(np.median(sigma[valid]))
+    for reverse in (False, True):
+        r = _end(np.nan_to_num(pos), valid, *images, shape, width, reverse)
+        if r is None:
+            continue
+        j, q = r
+        beyond = np.arange(j[-1] + 1, len(pos)) if reverse else np.arange(j[-1])
+        valid[beyond] = False
+        pos[beyond] = np.nan
+        pos[j] = q
+        sigma[j] = np.where(valid[j], np.maximum(sigma[j], s), s)
+        strength[j] = np.where(valid[j], strength[j], z)
+        valid[j] = True
+    return pos, valid, sigma, strength
