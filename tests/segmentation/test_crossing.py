@@ -6,9 +6,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from cslx.segmentation import extract
-from cslx.segmentation.crossing import inside, interpolated, other_stripe
+from cslx.segmentation.crossing import EDGE, inside, interpolated, other_stripe
 
 H, W = 120, 200  # the frame of tests/segmentation/test_robust.py: shared programs
 
@@ -73,7 +74,11 @@ def test_single_stripe_has_no_crossing():
     assert not bool(found)  # nothing crosses: nothing is interpolated
 
 
-def test_stripe_leaving_the_frame_sideways_gives_no_centres_on_the_border():
+@pytest.mark.parametrize("extend", [False, True])
+def test_stripe_leaving_the_frame_sideways_gives_no_centres_on_the_border(extend, monkeypatch):
+    from cslx.segmentation import robust
+
+    monkeypatch.setattr(robust, "BORDER", extend)
     rng = np.random.default_rng(23)
     h, w = 160, 200  # the frame of test_robust's tilted stripe
     vv, uu = np.mgrid[0:h, 0:w].astype(float)
@@ -83,11 +88,15 @@ def test_stripe_leaving_the_frame_sideways_gives_no_centres_on_the_border():
     c = extract(img, "linked", stripe="v")
     pos, valid = np.asarray(c.pos), np.asarray(c.valid)
     # no centre where the stripe is outside the frame (the border's own ridge), and the
-    # last ones inside (cut profiles) not pulled off: those within EDGE of the border, which
-    # `inside` drops, come back from the fit through the centres inside (`border`)
+    # last ones inside (cut profiles) not pulled off
     assert not valid[u_true > w - 1].any()
-    assert pos[valid].max() <= w - 1
     ok = valid & (u_true < w - 1)
     assert np.abs(pos - u_true)[ok].max() < 0.3
-    assert ok.sum() >= np.sum(u_true < w - 1) - 1
-    assert not np.all(np.asarray(inside(pos[valid], w)))  # rows within EDGE: found
+    if not extend:  # none within EDGE of the border (`inside` drops them)
+        assert np.all(np.asarray(inside(pos[valid], w)))
+        assert pos[valid].max() < w - 1 - EDGE
+        assert ok.sum() >= np.sum(u_true < w - 4) - 2
+    else:  # those come back from the fit through the centres inside (`border`)
+        assert pos[valid].max() <= w - 1
+        assert ok.sum() >= np.sum(u_true < w - 1) - 1
+        assert not np.all(np.asarray(inside(pos[valid], w)))
