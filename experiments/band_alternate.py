@@ -74,11 +74,21 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 555])
     p.add_argument("--frames", type=int, default=24)
     p.add_argument("--calls", type=int, default=400)
+    p.add_argument("--tracker-only", action="store_true", help="the Tracker's offsets only")
     a = p.parse_args(argv)
     sensor = sensor32()
     configs = {alt: pipeline.PipelineConfig(roi_med_alternate=alt) for alt in (False, True)}
     for seed in a.seeds:
         frames, truth = video_frames(a.frames, seed, with_truth=True)
+        if a.tracker_only:  # the filtered offset against the rendered truth
+            from cslx import sim
+
+            lines = sim.render_video(n_frames=a.frames, seed=seed, nuisance="sunny")[3]
+            for k, c in configs.items():
+                e = np.abs(robot(default_sensor(), c, frames)[:, 0] - lines["offset_mm"])
+                print(f"seed {seed} alternate={k}: Tracker |offset − truth| median "
+                      f"{np.nanmedian(e):.4f} mm, max {np.nanmax(e):.4f}", flush=True)  # fmt: skip
+            continue
         res = {k: carried(sensor, c, frames) for k, c in configs.items()}
         for k, c in configs.items():
             worst, err = agreement(sensor, c, res[k], frames, truth)

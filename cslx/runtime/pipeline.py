@@ -188,7 +188,9 @@ def _stripe(
             lag_stride=config.roi_lag_stride if lag else 1,
             refresh=refresh,
         )
-        ok = jnp.all(jnp.isfinite(r.filter)) & (jnp.isfinite(r.kurtosis) | (r.steps == 0))
+        finite = jnp.isfinite(r.kurtosis)  # NaN where ``refresh`` skipped the step
+        finite = finite if refresh is None else finite | (r.steps == 0)
+        ok = jnp.all(jnp.isfinite(r.filter)) & finite
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
 
