@@ -171,7 +171,8 @@ class PipelineConfig(eqx.Module):
         median 6.267 → 5.942 ms, p10 4.266 → 4.108, paired −0.160 ms (300 frames, load
         7.8–8.3, experiments/band_alternate.py); against ``HEAD`` 6e3163b
         (`experiments.ab_tracking`, 300 frames, load 6.7–9.4) median 10.45 → 10.28 ms, p10
-        6.45 → 6.23, paired −0.354 ms (quartiles −2.56 / +1.85).
+        6.45 → 6.23, paired −0.354 ms (quartiles −2.56 / +1.85); again on seed 0 (400
+        frames, load 11.4–11.6) median 8.273 → 8.046 ms, p10 5.130 → 4.839, paired −0.173.
     med_delay: ``"ridge"`` (default; the ridge displacement at Steger's scale ``sigma``) or
         ``"xcorr"`` (the correlation peak of `cslx.segmentation.med.med`'s default), for the
         full frame and the bands alike. On held-out rendered frames "xcorr" left full-frame
