@@ -81,7 +81,9 @@ class PipelineState(eqx.Module):
     band filters (L_roi,). row0: first row of the horizontal stripe's band; col0: first
     column of the vertical stripe's band; lean_h / lean_v: (s₀, b) of a band that follows a
     leaning stripe, (0, 0) for the straight band at row0 / col0 (`cslx.runtime.band_lean`);
-    tracking: process the bands (True) or the full frame (False) next.
+    tracking: process the bands (True) or the full frame (False) next. turn: which band's
+    filter steps on the next tracking frame with ``roi_med_alternate`` (True: h; flipped
+    on every band frame).
     """
 
     filter_h: Float[Array, " Lh"]
@@ -93,6 +95,7 @@ class PipelineState(eqx.Module):
     tracking: Bool[Array, ""]
     lean_h: Float[Array, " 2"]
     lean_v: Float[Array, " 2"]
+    turn: Bool[Array, ""]
 
 
 class FrameResult(NamedTuple):
@@ -146,6 +149,7 @@ def init_state(
         tracking=jnp.zeros((), bool),
         lean_h=jnp.zeros(2, dtype),
         lean_v=jnp.zeros(2, dtype),
+        turn=jnp.zeros((), bool),
     )
 
 
@@ -161,6 +165,7 @@ def _stripe(
     size=0,
     stride=1,
     lag=False,
+    refresh=None,
 ):
     """MED (warm start W0) then Steger on one image or band: (centres, filter, steps, kurtosis).
 
@@ -181,8 +186,11 @@ def _stripe(
             symmetric=symmetric,
             lag=lag,
             lag_stride=config.roi_lag_stride if lag else 1,
+            refresh=refresh,
         )
-        ok = jnp.all(jnp.isfinite(r.filter)) & jnp.isfinite(r.kurtosis)
+        finite = jnp.isfinite(r.kurtosis)  # NaN where ``refresh`` skipped the step
+        finite = finite if refresh is None else finite | (r.steps == 0)
+        ok = jnp.all(jnp.isfinite(r.filter)) & finite
         # A black or clipped frame has no variance: keep the old filter, never a NaN one.
         W = jnp.where(ok, r.filter, W0)
 
@@ -230,13 +238,17 @@ def _bands(cut, shape, state: PipelineState, config: PipelineConfig, max_steps=N
     band_v, off_v = band_cut(cut, 1, state.col0, state.lean_v, 2 * config.roi_half_w, shape, lean)
     med_on, sym = config.use_med and config.roi_med, config.roi_symmetric
     L = config.L_roi
+    turn = state.turn  # with roi_med_alternate: h steps on a True turn, v on a False one
+    alt = lag and med_on and config.roi_med_alternate
     ch, Wh, sh, kh = _stripe(
-        band_h, state.roi_filter_h, 0, L, config, max_steps, med_on, sym, height, lag=lag
-    )
+        band_h, state.roi_filter_h, 0, L, config, max_steps, med_on, sym, height, lag=lag,
+        refresh=turn if alt else None,
+    )  # fmt: skip
     cv, Wv, sv, kv = _stripe(
-        band_v, state.roi_filter_v, 1, L, config, max_steps, med_on, sym, width, lag=lag
-    )
-    new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v), state, (Wh, Wv))
+        band_v, state.roi_filter_v, 1, L, config, max_steps, med_on, sym, width, lag=lag,
+        refresh=~turn if alt else None,
+    )  # fmt: skip
+    new = eqx.tree_at(lambda s: (s.roi_filter_h, s.roi_filter_v, s.turn), state, (Wh, Wv, ~turn))
     return (
         _shift(ch, off_h),
         _shift(cv, off_v),

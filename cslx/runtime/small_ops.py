@@ -98,6 +98,13 @@ def masked_median(x: Float[Array, " n"], mask: Bool[Array, " n"]) -> Float[Array
     1.126 → 1.135 ms and 2.09 → 2.45 ms (600 interleaved calls, load 8–9); a sort of the
     keys 1.089 → 1.204 ms. What a median costs is its passes over the points, not the
     kernels' dispatch.
+    Not kept either (speed13d): the IRLS loops' medians warm-started, the first bracket
+    taken around the previous iteration's median (± 4× its last change, within 1/64 and
+    1/2 of it; one more counting pass to place the rank, exact whatever the guess): 11.2
+    → 7.2 passes a median on average (384 medians of 8 tracking frames, sunny video seed
+    0), outputs identical, but the plate fit alone 98.8 → 102.4 µs p10 (paired +7.5 µs,
+    2000 interleaved calls, load 8) and the weld features 0.870 → 0.872 ms median
+    (`experiments.ab_weld`, 400 calls, load 8): the passes are not what a median costs.
     """
     x = lax.stop_gradient(x)
     if x.dtype != jnp.float32:  # the keys are 32-bit: other dtypes take the sort

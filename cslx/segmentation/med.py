@@ -282,10 +282,12 @@ def _med(
     symmetric=False,
     lag=False,
     lag_stride=1,
+    refresh=None,
 ):
     pb = med_prepare(I, axis=axis, L=L, taper=taper)
     if lag:
-        return _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, lag_stride)
+        args = (delay_kind, ridge_sigma, symmetric, lag_stride, refresh)
+        return _lagged(pb, W0, axis, loading, *args)
 
     def step(y, args):
         # y = (filter, Σ_j k_j of the previous filter): the solver's error on the second
@@ -336,6 +338,7 @@ def med(
     symmetric: bool = False,
     lag: bool = False,
     lag_stride: int = 1,
+    refresh: ArrayLike | None = None,
 ) -> MEDResult:
     """MED of one monochrome frame by the fixed point of eqs. (22)–(24) (section 3.2).
 
@@ -371,6 +374,9 @@ def med(
         lag_stride: with ``lag``, the step (and the statistics: kurtosis, sign, delay) is
             taken on every ``lag_stride``-th pair of segments only; the output still
             filters every segment (`_lagged`).
+        refresh: with ``lag`` and a linear-phase filter output by its shift matrix, a
+            traced bool: False skips the step (`_lagged`: ``filter`` is ``init``, ``steps``
+            0, ``kurtosis`` NaN; the output is still that of ``init``).
 
     Returns:
         `MEDResult` with the delay-compensated output (same shape as I), the filter, its
@@ -384,10 +390,13 @@ def med(
     args = (int(taper), float(tol), int(max_steps), loading, delay, float(ridge_sigma))
     if int(lag_stride) < 1:
         raise ValueError(f"lag_stride must be a positive integer, got {lag_stride!r}")
-    return _med(I, W0, axis, L, *args, bool(symmetric), bool(lag), int(lag_stride))
+    if refresh is not None and not (lag and delay == "centre" and (L % 2 == 0 or lag_stride > 1)):
+        raise ValueError("refresh needs lag and a linear-phase filter output by its matrix")
+    flags = (bool(symmetric), bool(lag), int(lag_stride))
+    return _med(I, W0, axis, L, *args, *flags, None if refresh is None else jnp.asarray(refresh))
 
 
-def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1):
+def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1, refresh=None):
     """`med`'s ``lag``: the output of the warm-start filter W0, and one step from it.
 
     One fixed-point step W1 = update(W0) needs the output statistics at W0 (`med_fft.update`
@@ -412,6 +421,8 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1)
     """
     L, m = pb.L, pb.m
     matrix = delay_kind == "centre" and not (L % 2 and stride == 1)
+    if refresh is not None:  # the step on some frames only (`med`'s ``refresh``)
+        return _refreshed(pb, W0, axis, loading, symmetric, stride, refresh)
     if stride == 1:
         sub = pb
     elif matrix:  # the pairs (2j, 2j + 1), j = 0, k, 2k …: those of `med_fft.pairs`
@@ -432,6 +443,34 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1)
     # ±W have the same kurtosis and the step keeps W0's orientation: W1 takes W0's sign
     one = jnp.ones((), jnp.int32)
     return MEDResult(out, W1 * sign, delay, st.excess, one, jnp.zeros((), bool))
+
+
+def _refreshed(pb, W0, axis, loading, symmetric, stride, refresh):
+    """`_lagged` of a linear-phase filter whose step runs only where ``refresh`` is True
+    (`lax.cond`: on the CPU only the chosen branch runs); elsewhere W0 is carried, with the
+    sign +1 (the filters carried from frame to frame are oriented by their last step), and
+    the band is filtered by the same matrix product. The tracking bands' step on one band a
+    frame (`PipelineConfig.roi_med_alternate`, where the measurements are)."""
+    L, m = pb.L, pb.m
+
+    def step():
+        if stride == 1:
+            sub = pb
+        else:
+            X = jnp.pad(pb.X, ((0, pb.s % 2), (0, 0))).reshape(-1, 2, m)[::stride]
+            sub = _f.prepare(X.reshape(-1, m), L)
+        W1, st = _f.update(W0, sub, loading, symmetric)
+        sign = _f.centre_sign(W0, st.w, sub)
+        return W1 * sign, sign, st.excess, jnp.ones((), jnp.int32)
+
+    def keep():
+        nan = jnp.full((), jnp.nan, W0.dtype)
+        return W0, jnp.ones((), W0.dtype), nan, jnp.zeros((), jnp.int32)
+
+    W1, sign, excess, steps = jax.lax.cond(refresh, step, keep)
+    out = _centro_output(_f.shift_matrix(W0 * sign, (L - 1) / 2, m, pb.n), pb.X, axis)
+    delay = jnp.asarray((L - 1) / 2, W0.dtype)
+    return MEDResult(out, W1, delay, excess, steps, jnp.zeros((), bool))
 
 
 def _centro_output(M, X, axis):

@@ -629,6 +629,30 @@ def test_lagged_step_on_every_other_pair_of_segments(axis):
     assert float(jnp.max(jnp.abs(strided.filter - lag.filter))) > 1e-6
 
 
+@pytest.mark.parametrize("axis", [0, 1])
+def test_lagged_step_refreshed_on_some_frames_only(axis):
+    """``refresh`` (`PipelineConfig.roi_med_alternate`, issue 13): True is the lagged step
+    (filter, kurtosis, output); False carries the start filter (0 steps, NaN kurtosis) and
+    outputs that filter as the lagged step does."""
+    truth = 30 + 3 * np.sin(np.arange(96) / 9)
+    I = jnp.asarray(stripe_image(64, 96, truth, speckle=0.2, seed=5))
+    prev = jnp.asarray(stripe_image(64, 96, truth + 0.7, speckle=0.2, seed=6))
+    I, prev = (I, prev) if axis == 0 else (I.T, prev.T)
+    kw = dict(axis=axis, L=16, symmetric=True, lag=True, lag_stride=2)
+    W0 = med(prev, max_steps=60, axis=axis, L=16, symmetric=True).filter
+    lag = med(I, init=W0, **kw)
+    on = med(I, init=W0, refresh=True, **kw)
+    off = med(I, init=W0, refresh=False, **kw)
+    np.testing.assert_allclose(np.asarray(on.filter), np.asarray(lag.filter), atol=1e-12)
+    assert float(on.kurtosis) == pytest.approx(float(lag.kurtosis), abs=1e-9)
+    assert int(on.steps) == 1 and int(off.steps) == 0 and np.isnan(float(off.kurtosis))
+    np.testing.assert_array_equal(np.asarray(off.filter), np.asarray(W0))
+    for r in (on, off):
+        np.testing.assert_allclose(np.asarray(r.output), np.asarray(lag.output), atol=1e-9)
+    with pytest.raises(ValueError, match="refresh"):
+        med(I, init=W0, axis=axis, L=16, symmetric=True, refresh=True)
+
+
 @pytest.mark.parametrize("m, L", [(64, 16), (7, 3), (10, 4), (12, 12)])
 def test_shift_matrix_is_the_fourier_shift(m, L):
     """`med_fft.shift_matrix` (the lagged band output as one matrix product, issue 13) is
