@@ -12,6 +12,11 @@ of the filtered offset, mm, and heading, deg). Last, both tracking modes timed o
 each with its own carried state, calls interleaved (median, p10, paired median).
 
     OPENBLAS_NUM_THREADS=1 python -m experiments.band_alternate --seeds 0 1 555 --calls 400
+
+``--sequences SEED ...`` instead scores the `Tracker` with MED in the bands, both settings,
+on development approaches to a T (`experiments.tracking_sequences`'s scenes and scores):
+
+    python -m experiments.band_alternate --sequences 7301 7302 7305 7530 7531
 """
 
 from __future__ import annotations
@@ -64,6 +69,41 @@ def robot(sensor, config, frames):
     return np.asarray([[o.offset_mm, o.heading_deg] for o in obs], float)
 
 
+def sequences(configs, seeds, cache) -> int:
+    """Per approach (seed, placement, nuisance): the issue-12 scores of the `Tracker` with
+    each configuration (offset error mean / max mm, heading error mean °, T recall % / false
+    T frames), then their means over the runs."""
+    import pathlib
+
+    from cslx.runtime.tracker import Tracker
+    from cslx.sensor import default_sensor
+    from experiments import tracking_sequences as ts
+
+    trackers = {
+        k: Tracker(default_sensor(), config=c, log=logging.getLogger("band_alternate"))
+        for k, c in configs.items()
+    }
+    got = {k: [] for k in configs}
+    for seed in seeds:
+        for placement in ts.PLACEMENTS:
+            for nuisance in ("sunny", "clean", "shadow"):
+                seq = ts.make_sequence(seed, nuisance, placement, 48, pathlib.Path(cache))
+                text = []
+                for k, t in trackers.items():
+                    s = ts.score(ts.run_tracker(t, seq), seq)
+                    got[k].append(s)
+                    text.append(
+                        f"alternate={k} {s['offset_mean_mm']:.3f} / {s['offset_max_mm']:.3f} "
+                        f"{s['heading_mean_deg']:.3f}° T {s['t_recall_pct']:.0f} / {s['t_false']}"
+                    )
+                print(seed, placement, nuisance, " | ".join(text), flush=True)
+    for k, rows in got.items():
+        off = np.mean([r["offset_mean_mm"] for r in rows])
+        hd = np.mean([r["heading_mean_deg"] for r in rows])
+        print(f"alternate={k}: {len(rows)} runs, offset mean {off:.4f} mm, heading {hd:.3f}°")
+    return 0
+
+
 def main(argv=None) -> int:
     import jax
 
@@ -74,21 +114,22 @@ def main(argv=None) -> int:
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 555])
     p.add_argument("--frames", type=int, default=24)
     p.add_argument("--calls", type=int, default=400)
-    p.add_argument("--tracker-only", action="store_true", help="the Tracker's offsets only")
+    p.add_argument(
+        "--sequences",
+        type=int,
+        nargs="*",
+        metavar="SEED",
+        help="instead: the Tracker with MED in the bands on these development approaches "
+        "of experiments.tracking_sequences (both placements; sunny, clean, shadow)",
+    )
+    p.add_argument("--cache", default="/tmp/cslx-tracking-sequences/sequences")
     a = p.parse_args(argv)
     sensor = sensor32()
     configs = {alt: pipeline.PipelineConfig(roi_med_alternate=alt) for alt in (False, True)}
+    if a.sequences:
+        return sequences(configs, a.sequences, a.cache)
     for seed in a.seeds:
         frames, truth = video_frames(a.frames, seed, with_truth=True)
-        if a.tracker_only:  # the filtered offset against the rendered truth
-            from cslx import sim
-
-            lines = sim.render_video(n_frames=a.frames, seed=seed, nuisance="sunny")[3]
-            for k, c in configs.items():
-                e = np.abs(robot(default_sensor(), c, frames)[:, 0] - lines["offset_mm"])
-                print(f"seed {seed} alternate={k}: Tracker |offset − truth| median "
-                      f"{np.nanmedian(e):.4f} mm, max {np.nanmax(e):.4f}", flush=True)  # fmt: skip
-            continue
         res = {k: carried(sensor, c, frames) for k, c in configs.items()}
         for k, c in configs.items():
             worst, err = agreement(sensor, c, res[k], frames, truth)
