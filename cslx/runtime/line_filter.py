@@ -189,7 +189,9 @@ class KalmanConfig:
     junction_bar_slope: bool = True
     # with fewer than 10 (`JunctionTrack.bar_min_points`) but at least this many points, the
     # bar's line only if its slope is ≥ `junction_bar_oblique_deg` from square, beyond 3σ,
-    # and nearer the newest sighting than their median (`JunctionTrack._on_bar`; None: off)
+    # and nearer the newest sighting than their median (`JunctionTrack._on_bar`; None: off).
+    # Replays: fresh seed 7400 T at 120° clean 66.7 % / 3 false T frames → 100 % / 0, sunny
+    # 55.6 % / 7 → 100 % / 3; 12 dev runs' T scores identical (`cslx.runtime.junction_track`)
     junction_bar_oblique_points: int | None = 6
     junction_bar_oblique_deg: float = 15.0
     # a bead whose width differs from the median of the last `width_memory` accepted ones by
