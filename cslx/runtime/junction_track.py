@@ -73,11 +73,13 @@ rule; the paper gives none):
   and nearer the median. Replays (`experiments.junction_ramp --variant`, one recording per
   run, T recall % / false T frames, 10 points → this): 12 dev runs (48 frames; 7326 beside
   clean and sunny, 1201, 7320, 7322, 7323, 7325 beside sunny, 1202, 1203, 7321, 7324, 7327
-  flank sunny) every score identical, reports identical but one frame of 7321 flank sunny;
+  flank sunny) every score identical, the report changed in 3 frames (7326 beside sunny 2,
+  7321 flank sunny 1; with 25° from square 2, with 7 points 2);
   fresh seeds (40 frames) T at 120° 7400 clean 66.7 / 3 → 100 / 0, sunny 55.6 / 7 → 100 / 3,
   T at 60° 7400 sunny 93.8 / 2 → 96.9 / 1; unchanged 120° 7401–7405 clean (88.9 / 0, 94.1 /
   1, 61.5 / 6, 100 / 0, 100 / 0), 7401 and 7403 sunny (88.9 / 0, 100 / 1), 60° 7400 and
-  7401 clean (96.9 / 1, 97.3 / 0).
+  7401 clean (96.9 / 1, 97.3 / 0). Not taken: 7 points (120° 7400 clean 88.9 / 1, sunny
+  77.8 / 5); no angle test, 2σ (60° sunny 100 / 0, but 10 changed reports over 11 dev runs).
 """
 
 from __future__ import annotations
