@@ -49,7 +49,7 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   position is still their odometry-carried median (fewer than the 10 points `bar_slope`
   needs), and the oblique bar's crossing with the stripe moves 0.7–1.5 mm a frame against
   1.5 mm of travel, so the report falls 3–4 mm behind for 3 frames. With 6 points
-  (`experiments.junction_ramp --bar-min-points 6`; fresh seeds 7400–7405 at 120°, 7400–7402
+  (`experiments.junction_ramp --variant bar_min_points=6`; fresh seeds 7400–7405 at 120°, 7400–7402
   at 60°): 120° clean 7400 66.7 % / 3 → 100 % / 0, sunny 55.6 % / 7 → 100 % / 3 (7403
   clean stays 61.5 % / 6, no other run changes), 60° sunny 7400 93.8 % / 2 → 100 % / 0; but
   on the 51 development runs (1201–1206, 7301–7302, 7320–7327) one gains a false T (7326
