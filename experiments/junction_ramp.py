@@ -14,9 +14,11 @@ the evidence in `cslx.runtime.junction`'s docstring). Sequences: the development
     python -m experiments.junction_ramp --condition cross_toe --seed 7400 --seeds 21 \\
         --nuisance clean --nuisance sunny --ramp inf --ramp 0.4
 
-Prints per run: T recall % / false T frames per ramp value, then the totals;
-``--bar-min-points`` replays `JunctionTrack` with another point count for the bar's line
-(issue 12's T at 120°, `experiments.tracking_generality`).
+Prints per run: T recall % / false T frames per ramp value (per variant; after the first,
+also the frames whose report differs from the first variant's), then the totals;
+``--variant`` replays `JunctionTrack` with overrides, e.g. ``bar_min_points=6`` (issue 12's
+T at 120°, `experiments.tracking_generality`), all on the same recorded frames;
+``--record-cache DIR`` keeps the recorded runs, so another variant skips the tracker.
 """
 
 from __future__ import annotations
@@ -24,10 +26,24 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
+import pickle
 
 import numpy as np
 
 from experiments.common import parser
+
+
+def parse_overrides(text: str) -> dict:
+    """'key=value,key=value' → `JunctionTrack` keyword overrides ('-': none); values are
+    Python literals."""
+    import ast
+
+    if text.strip() in ("", "-"):
+        return {}
+    return {
+        k.strip(): ast.literal_eval(v.strip())
+        for k, v in (kv.split("=", 1) for kv in text.split(","))
+    }
 
 
 def recording_tracker(sensor):
@@ -97,13 +113,14 @@ def sightings(run: dict, config) -> list:
     return out
 
 
-def replay(run: dict, sights: list, kalman, x_ref: float, bar_min_points: int = 10) -> np.ndarray:
-    """`JunctionTrack` over the recorded frames as `Tracker._junction` drives it."""
+def replay(run: dict, sights: list, kalman, x_ref: float, **track_kw) -> np.ndarray:
+    """`JunctionTrack` over the recorded frames as `Tracker._junction` drives it
+    (`track_kw`: `JunctionTrack.from_config` overrides)."""
     from cslx.runtime.junction_track import JunctionTrack, cut_by_view
     from cslx.runtime.line_filter import fit_line
 
     c = kalman
-    track = JunctionTrack.from_config(c, x_ref, bar_min_points=bar_min_points)
+    track = JunctionTrack.from_config(c, x_ref, **track_kw)
     rep = []
     for i, (fr, s) in enumerate(zip(run["frames"], sights, strict=True)):
         if i:
@@ -129,10 +146,19 @@ def replay(run: dict, sights: list, kalman, x_ref: float, bar_min_points: int = 
 
 
 def main(
-    runs, ramps=(math.inf, 0.4), cache=None, n_frames: int = 40, bar_min_points: int = 10
+    runs,
+    ramps=(math.inf, 0.4),
+    cache=None,
+    n_frames: int = 40,
+    variants=None,
+    record_cache=None,
 ) -> list[dict]:
     """`runs`: (kind, name, seed, nuisance) with kind "condition" or "placement"; frames
-    per run `n_frames` (the evidence: 40 for conditions, 48 for placements)."""
+    per run `n_frames` (the evidence: 40 for conditions, 48 for placements); `variants`:
+    name → `JunctionTrack` overrides, each replayed per ramp value (default: none, the
+    tracker's own); `record_cache`: a folder for the recorded runs (pickles; the replays
+    of other variants then skip the tracker)."""
+    variants = variants or {"": {}}
     from cslx.environment import configure
 
     configure()
@@ -142,31 +168,51 @@ def main(
 
     rows, trackers = [], {}
     for kind, name, seed, nu in runs:
-        rig = "default"
-        if kind == "condition":
-            seq = tg.sequence(seed, tg.CONDITIONS[name], n_frames, nu)
-            sensor = seq.pop("sensor")
-            rig = repr(tg.CONDITIONS[name].get("rig", {}))
+        key = f"{kind}_{name}_{nu}_{seed}_{n_frames}.pkl"
+        path = None if record_cache is None else pathlib.Path(record_cache) / key
+        if path is not None and path.exists():
+            with open(path, "rb") as fh:
+                run, seq, sensor, base, kalman, weld, x_ref = pickle.load(fh)
         else:
-            seq, sensor = ts.make_sequence(seed, nu, name, n_frames, cache), default_sensor()
-        if rig not in trackers:  # one compiled tracker per rig
-            trackers[rig] = recording_tracker(sensor)
-        tracker = trackers[rig]
-        run = record(tracker, seq)
-        base = tg.score(run["obs"], seq, sensor)
+            rig = "default"
+            if kind == "condition":
+                seq = tg.sequence(seed, tg.CONDITIONS[name], n_frames, nu)
+                sensor = seq.pop("sensor")
+                rig = repr(tg.CONDITIONS[name].get("rig", {}))
+            else:
+                seq = ts.make_sequence(seed, nu, name, n_frames, cache)
+                sensor = default_sensor()
+            if rig not in trackers:  # one compiled tracker per rig
+                trackers[rig] = recording_tracker(sensor)
+            tracker = trackers[rig]
+            run = record(tracker, seq)
+            base = tg.score(run["obs"], seq, sensor)
+            kalman, weld, x_ref = tracker.kalman, tracker.config.weld, tracker.x_ref
+            seq = {k: v for k, v in seq.items() if k != "frames"}  # what `score` reads
+            if path is not None:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                with open(path, "wb") as fh:
+                    pickle.dump((run, seq, sensor, base, kalman, weld, x_ref), fh)
         row = dict(run=f"{name} {nu} {seed}", tracker=(base["t_recall_pct"], base["t_false"]))
         for r in ramps:
-            config = dataclasses.replace(tracker.config.weld, crossing_ramp_max=r)
-            rep = replay(run, sightings(run, config), tracker.kalman, tracker.x_ref, bar_min_points)
-            obs = [dataclasses.replace(o) for o in run["obs"]]
-            for o, x in zip(obs, rep, strict=True):
-                o.junction, o.junction_x_mm = bool(np.isfinite(x)), float(x)
-            s = tg.score(obs, seq, sensor)
-            row[f"ramp {r:g}"] = (s["t_recall_pct"], s["t_false"])
+            config = dataclasses.replace(weld, crossing_ramp_max=r)
+            sights = sightings(run, config)
+            first = None
+            for name_v, kw in variants.items():
+                rep = replay(run, sights, kalman, x_ref, **kw)
+                first = rep if first is None else first
+                obs = [dataclasses.replace(o) for o in run["obs"]]
+                for o, x in zip(obs, rep, strict=True):
+                    o.junction, o.junction_x_mm = bool(np.isfinite(x)), float(x)
+                s = tg.score(obs, seq, sensor)
+                row[f"ramp {r:g}{name_v}"] = (s["t_recall_pct"], s["t_false"])
+                if rep is not first:  # frames whose report differs from the first variant's
+                    row[f"ramp {r:g}{name_v}"] += (
+                        int((~np.isclose(rep, first, 0, 0, True)).sum()),
+                    )
         rows.append(row)
         print(" | ".join(f"{k} {v}" for k, v in row.items()), flush=True)
-    for r in ramps:
-        k = f"ramp {r:g}"
+    for k in [k for k in rows[0] if k.startswith("ramp")] if rows else []:
         false = sum(row[k][1] for row in rows)
         low = sum(row[k][0] < 90.0 for row in rows)
         print(f"{k}: {false} false T frames, {low} runs with T recall < 90 %")
@@ -181,8 +227,12 @@ if __name__ == "__main__":
     p.add_argument("--nuisance", action="append")
     p.add_argument("--ramp", type=float, action="append", help="crossing_ramp_max values")
     p.add_argument("--cache", help="tracking_sequences frame cache")
+    p.add_argument("--record-cache", help="folder for the recorded runs (pickles)")
     p.add_argument(
-        "--bar-min-points", type=int, default=10, help="JunctionTrack's, for the bar's line"
+        "--variant",
+        action="append",
+        help="JunctionTrack overrides, e.g. bar_oblique_points=6,bar_oblique_deg=15 (repeatable;"
+        " '-' the tracker's own)",
     )
     a = p.parse_args()
     seeds = range(a.seed, a.seed + a.seeds)
@@ -192,4 +242,5 @@ if __name__ == "__main__":
     cache = pathlib.Path(a.cache) if a.cache else None
     todo = todo or [("condition", "cross_toe", a.seed, "clean")]
     ramps = tuple(a.ramp or (math.inf, 0.4))
-    main(todo, ramps, cache, 4 if a.quick else a.frames, a.bar_min_points)
+    variants = {f" [{v}]": parse_overrides(v) for v in a.variant or ["-"]}
+    main(todo, ramps, cache, 4 if a.quick else a.frames, variants, a.record_cache)

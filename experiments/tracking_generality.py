@@ -49,12 +49,18 @@ over 80 mm 0.106 / 0.44; 3 mm a frame 0.128 / 0.28 (T recall 94.1 %); green lase
   position is still their odometry-carried median (fewer than the 10 points `bar_slope`
   needs), and the oblique bar's crossing with the stripe moves 0.7–1.5 mm a frame against
   1.5 mm of travel, so the report falls 3–4 mm behind for 3 frames. With 6 points
-  (`experiments.junction_ramp --bar-min-points 6`; fresh seeds 7400–7405 at 120°, 7400–7402
+  (`experiments.junction_ramp --variant bar_min_points=6`; fresh seeds 7400–7405 at 120°, 7400–7402
   at 60°): 120° clean 7400 66.7 % / 3 → 100 % / 0, sunny 55.6 % / 7 → 100 % / 3 (7403
   clean stays 61.5 % / 6, no other run changes), 60° sunny 7400 93.8 % / 2 → 100 % / 0; but
   on the 51 development runs (1201–1206, 7301–7302, 7320–7327) one gains a false T (7326
   beside sunny 100 % / 0 → 96.6 % / 1, the case described in `cslx.runtime.junction_track`),
-  as with 8 and 7 points: not changed.
+  as with 8 and 7 points: not changed. Since: from 6 points for a clearly oblique bar only
+  (`KalmanConfig.junction_bar_oblique_points`: slope ≥ 15° from square, beyond 3σ, and the
+  line nearer the newest sighting than the median; its docstring has the replays): 120°
+  7400 clean 66.7 % / 3 → 100 % / 0, sunny 55.6 % / 7 → 100 % / 3, 60° sunny 7400 93.8 % /
+  2 → 96.9 % / 1, 12 dev runs' scores identical (7326 beside sunny kept at 100 % / 0; the
+  slope test without the newest-sighting test kept its false T). 7403 clean stays 61.5 % /
+  6, 7400 sunny keeps 3 false T frames: not diagnosed.
 - the weld 70 mm to the robot's right (its toe at the image's edge): an estimate on 97.5 %
   of frames, offset max 1.47 mm (the view, not the tracker).
 - a projector rolled 15° / 25° (`proj_roll_15`, `proj_roll_25`; fresh seeds 7400 / 7401, 40

@@ -61,6 +61,25 @@ rule; the paper gives none):
   the first line through 12 sightings scattered ±3 mm, k 1.36 ± 0.82, 3.9 mm short; with
   it and 5 points, 7326 kept it: 6–9 sightings of a bar entering the view, short at
   first while the robot turned, k 0.65 ± 0.09 for a bar at 90°, 2.5 mm short.
+- an oblique bar from fewer points (`bar_oblique_points`,
+  `KalmanConfig.junction_bar_oblique_points` 6): a bar at 120° is in view 9 frames at fresh
+  seed 7400, too few for the 10-point line, and its crossing with the stripe slides
+  0.7–1.5 mm a frame against 1.5 mm of travel, so the median falls 3–4 mm behind. With 6–9
+  points the line is taken only if its slope is ≥ `bar_oblique_deg` (15°) from square,
+  beyond `bar_oblique_sigma` (3) standard deviations, and the line passes nearer the newest
+  sighting than their median x_r does (`bar_newest`). 7326 beside sunny's false T had
+  k 0.65–0.69 ± 0.13–0.16 over 6–9 points (33° from square, 5σ: the slope test alone kept it,
+  as did 6 points without any test) with the newest sightings 2.6 and 4.2 mm off that line
+  and nearer the median. Replays (`experiments.junction_ramp --variant`, one recording per
+  run, T recall % / false T frames, 10 points → this): 12 dev runs (48 frames; 7326 beside
+  clean and sunny, 1201, 7320, 7322, 7323, 7325 beside sunny, 1202, 1203, 7321, 7324, 7327
+  flank sunny) every score identical, the report changed in 3 frames (7326 beside sunny 2,
+  7321 flank sunny 1; with 25° from square 2, with 7 points 2);
+  fresh seeds (40 frames) T at 120° 7400 clean 66.7 / 3 → 100 / 0, sunny 55.6 / 7 → 100 / 3,
+  T at 60° 7400 sunny 93.8 / 2 → 96.9 / 1; unchanged 120° 7401–7405 clean (88.9 / 0, 94.1 /
+  1, 61.5 / 6, 100 / 0, 100 / 0), 7401 and 7403 sunny (88.9 / 0, 100 / 1), 60° 7400 and
+  7401 clean (96.9 / 1, 97.3 / 0). Not taken: 7 points (120° 7400 clean 88.9 / 1, sunny
+  77.8 / 5); no angle test, 2σ (60° sunny 100 / 0, but 10 changed reports over 11 dev runs).
 """
 
 from __future__ import annotations
@@ -101,6 +120,10 @@ class JunctionTrack:
         confirm_min: int = 2,
         bar_slope: bool = False,
         bar_min_points: int = 10,
+        bar_oblique_points: int | None = None,
+        bar_oblique_deg: float = 15.0,
+        bar_oblique_sigma: float = 3.0,
+        bar_newest: bool = True,
     ):
         self.window, self.tol, self.hold = int(window), float(tol_mm), int(hold)
         self.unseen_mm, self.margin = float(unseen_mm), float(margin_mm)
@@ -115,6 +138,12 @@ class JunctionTrack:
         self.confirm_min = max(int(confirm_min), 2)
         self.bar_slope = bool(bar_slope)
         self.bar_min_points = int(bar_min_points)  # fewest plate points for the bar's line
+        # fewer points for an oblique bar's line: None never; the newest-sighting test on or
+        # off (`_on_bar`, module docstring)
+        self.bar_oblique_points = bar_oblique_points
+        self.bar_oblique_tan = math.tan(math.radians(float(bar_oblique_deg)))
+        self.bar_oblique_sigma = float(bar_oblique_sigma)
+        self.bar_newest = bool(bar_newest)
         self.stripe_y = 0.0  # y_r of the vertical stripe (mm), from `update`
         self.stripe_line = (0.0, 0.0)  # the stripe on the wall, y_r = y0 + m x_r
         self.reset()
@@ -132,6 +161,8 @@ class JunctionTrack:
             fuse=c.junction_fuse,
             confirm_min=c.junction_confirm_min,
             bar_slope=c.junction_bar_slope,
+            bar_oblique_points=c.junction_bar_oblique_points,
+            bar_oblique_deg=c.junction_bar_oblique_deg,
         )
         kw.update(overrides)
         window, hold = c.junction_window, c.junction_hold
@@ -172,11 +203,15 @@ class JunctionTrack:
         """Where the line through these sightings' plate points (the crossing weld's centre
         line, `bar_slope`) meets the stripe now; NaN with fewer than `bar_min_points` (10)
         points, under 3 mm of spread along the stripe, or no slope beyond twice its standard
-        deviation (fewer points, tried for issue 12's T at 120°:
-        `experiments.tracking_generality`)."""
+        deviation. From `bar_oblique_points` (6) points on, fewer than `bar_min_points` pass
+        only for a clearly oblique bar that explains the newest sighting better than the
+        median (module docstring, "an oblique bar from fewer points")."""
         pts = np.array([self.points[f] for f in frames if f in self.points])
+        fewest = self.bar_min_points
+        if self.bar_oblique_points is not None:
+            fewest = min(fewest, int(self.bar_oblique_points))
         # too few points, or no spread along the stripe: no slope
-        if len(pts) < self.bar_min_points or np.ptp(pts[:, 1]) < 3.0:
+        if len(pts) < fewest or np.ptp(pts[:, 1]) < 3.0:
             return math.nan
         y0, m = self.stripe_line
         # x = a + k (y − y_s), Tukey-robust, then the intersection with y = y0 + m x
@@ -185,8 +220,17 @@ class JunctionTrack:
         if not (math.isfinite(a) and math.isfinite(th)):
             return math.nan
         k = math.tan(th)
-        if abs(k) < 2.0 * sd * (1.0 + k * k):  # sd of tan θ: no slope beyond its noise
+        sd_k = sd * (1.0 + k * k)  # the standard deviation of tan θ
+        if abs(k) < 2.0 * sd_k:  # no slope beyond its noise
             return math.nan  # the median: a bar ⟂ the stripe
+        if len(pts) < self.bar_min_points:  # few points: a clearly oblique bar only
+            xn, yn = pts[-1]  # the newest sighting: the line must explain it better
+            if (
+                abs(k) < max(self.bar_oblique_tan, self.bar_oblique_sigma * sd_k)
+                or self.bar_newest
+                and abs(xn - a - k * (yn - ys)) >= abs(xn - float(np.median(pts[:, 0])))
+            ):
+                return math.nan
         # a + k (y0 + m x − ys) = x
         den = 1.0 - k * m
         return (a + k * (y0 - ys)) / den if abs(den) > 0.1 else math.nan
