@@ -30,6 +30,23 @@ def _track(bar_slope: bool) -> JunctionTrack:
     )
 
 
+def _drive(pos, th, track, delta):
+    """The robot advances 1.5 mm and turns δ rad; the tracker is told (odometry)."""
+    d = 1.5
+    pos = pos + d * np.array([math.cos(th), math.sin(th)])
+    track.move(d, delta)
+    return pos, th + delta
+
+
+def _bar_x(pos, th, u, y_s):
+    """x_r where the bar (through the world origin along u) meets the stripe y_r = y_s,
+    the robot at `pos` heading `th`."""
+    c, s = math.cos(th), math.sin(th)
+    p = np.array([[c, s], [-s, c]]) @ (-pos)
+    v = np.array([[c, s], [-s, c]]) @ u
+    return p[0] + v[0] * (y_s - p[1]) / v[1]
+
+
 def _approach(bar_deg: float, bar_slope: bool, noise: float = 0.5) -> np.ndarray:
     """|reported − true| x_r (mm) per frame of a robot turning 0.25° a frame while it
     advances 1.5 mm towards a bar at `bar_deg` to its path; the vertical stripe at
@@ -41,15 +58,8 @@ def _approach(bar_deg: float, bar_slope: bool, noise: float = 0.5) -> np.ndarray
     pos, th, errors = np.array([-200.0, 0.0]), 0.0, []
     for i in range(40):
         if i:
-            d, delta = 1.5, math.radians(0.25)
-            pos = pos + d * np.array([math.cos(th), math.sin(th)])
-            th += delta
-            track.move(d, delta)
-        # the bar (through the world origin) in the robot frame, where it meets y_r = y_s
-        c, s = math.cos(th), math.sin(th)
-        p = np.array([[c, s], [-s, c]]) @ (-pos)
-        v = np.array([[c, s], [-s, c]]) @ u
-        x_true = p[0] + v[0] * (y_s - p[1]) / v[1]
+            pos, th = _drive(pos, th, track, math.radians(0.25))
+        x_true = _bar_x(pos, th, u, y_s)
         x = x_true + noise * rng.standard_normal()
         xj = track.update(i, x, (96.5, 219.5), y_s, (y_s, 0.0))
         if math.isfinite(xj):
@@ -137,14 +147,8 @@ def _entering(bar_deg: float, **overrides) -> np.ndarray:
     pos, th, errors = np.array([-235.0, 0.0]), 0.0, []
     for i in range(40):
         if i:
-            d, delta = 1.5, math.radians(0.5)
-            pos = pos + d * np.array([math.cos(th), math.sin(th)])
-            th += delta
-            track.move(d, delta)
-        c, s = math.cos(th), math.sin(th)
-        p = np.array([[c, s], [-s, c]]) @ (-pos)
-        v = np.array([[c, s], [-s, c]]) @ u
-        x_true = p[0] + v[0] * (y_s - p[1]) / v[1]
+            pos, th = _drive(pos, th, track, math.radians(0.5))
+        x_true = _bar_x(pos, th, u, y_s)
         seen = i >= 31
         x = x_true + 0.5 * rng.standard_normal() if seen else None
         # the view's far end just short of the bar until it enters
