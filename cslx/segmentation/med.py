@@ -425,9 +425,8 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1,
         return _refreshed(pb, W0, axis, loading, symmetric, stride, refresh)
     if stride == 1:
         sub = pb
-    elif matrix:  # the pairs (2j, 2j + 1), j = 0, k, 2k …: those of `med_fft.pairs`
-        X = jnp.pad(pb.X, ((0, pb.s % 2), (0, 0))).reshape(-1, 2, m)[::stride]
-        sub = _f.prepare(X.reshape(-1, m), L)
+    elif matrix:
+        sub = _strided_segments(pb, stride)
     else:
         sub = _f.pairs(pb, stride)
     W1, st = _f.update(W0, sub, loading, symmetric)
@@ -445,6 +444,12 @@ def _lagged(pb, W0, axis, loading, delay_kind, ridge_sigma, symmetric, stride=1,
     return MEDResult(out, W1 * sign, delay, st.excess, one, jnp.zeros((), bool))
 
 
+def _strided_segments(pb, stride):
+    """The pairs (2j, 2j + 1), j = 0, k, 2k … of `med_fft.pairs`, prepared (bit for bit)."""
+    X = jnp.pad(pb.X, ((0, pb.s % 2), (0, 0))).reshape(-1, 2, pb.m)[::stride]
+    return _f.prepare(X.reshape(-1, pb.m), pb.L)
+
+
 def _refreshed(pb, W0, axis, loading, symmetric, stride, refresh):
     """`_lagged` of a linear-phase filter whose step runs only where ``refresh`` is True
     (`lax.cond`: on the CPU only the chosen branch runs); elsewhere W0 is carried, with the
@@ -454,11 +459,7 @@ def _refreshed(pb, W0, axis, loading, symmetric, stride, refresh):
     L, m = pb.L, pb.m
 
     def step():
-        if stride == 1:
-            sub = pb
-        else:
-            X = jnp.pad(pb.X, ((0, pb.s % 2), (0, 0))).reshape(-1, 2, m)[::stride]
-            sub = _f.prepare(X.reshape(-1, m), L)
+        sub = pb if stride == 1 else _strided_segments(pb, stride)
         W1, st = _f.update(W0, sub, loading, symmetric)
         sign = _f.centre_sign(W0, st.w, sub)
         return W1 * sign, sign, st.excess, jnp.ones((), jnp.int32)
