@@ -13,10 +13,8 @@ saturated H 102 of 121, V 119 of 124), the rest at the fan's ends inside the fra
 on the border along (V, 0–15) and on clipped pixels (V sunny / saturated, 5–7).
 
 `extend` sets, at each end of the path, the centres closer than `FIT_WIDTHS` σ_t + `FIT_PX`
-to the border across (σ_t from the final pass's σ and measured width) by a quadratic
-(`FIT_DEG`: the lens bends a stripe near the border; a line left clean V frames 3 and 7
-0.5–1.5 px off over 25 rows, 17 gross centres) through the next `FIT_LEN` centres inside,
-out to the border (`MARGIN`), where:
+to the border across (σ_t from the final pass's σ and measured width) by a line (`FIT_DEG`,
+below) through the next `FIT_LEN` centres inside, out to the border (`MARGIN`), where:
 - the fit's slope is at least `MIN_SLOPE` (the stripe meets the border obliquely; an aligned
   stripe's ends are left alone, so the default rig's frames do not change);
 - the fit meets the border within `REACH` × that distance of its support (a path ending far
@@ -25,13 +23,39 @@ out to the border (`MARGIN`), where:
   surface corner between the support and the border (roll35/saturated V, seed 7577, frames
   1, 3 and 7: slope 0.75 inside, 0.52 beyond row 61) put the extrapolation 1–3.4 px off, 15–17
   gross centres a frame; the gate leaves such an end as it was (0.5 px caught two of the three
-  frames);
+  frames); it is what makes the line safe: without it the line set 17 gross centres on clean V
+  frames 3 and 7 (the stripe bends there, a surface's, not the lens's: the truth's quadratic
+  term over those supports 2.5–3.6e-3 px per centre², the median end's 1.7e-5);
 - each centre's image (bilinear, the second pass's monochrome image) is at least
   `LIT_SHARE` × the support's median, or a clipped pixel left unfilled (a clipped run that
   touches the border has no second flank to fill it from: a hole in R − G); the first dark
   one ends the stripe (its fan ends before the border), and path centres beyond are dropped.
 The centres set keep their σ where larger, else the path's median σ; new ones get the
 path's median strength.
+
+Why a line, not a quadratic (`FIT_DEG`; branch border11b). The fit is extrapolated k centres
+beyond a support of L = `FIT_LEN`: a bias δ on the support (the cut or sunny profile shifts
+the path's centres by 0.1–0.3 px, smoothly) grows at the border by ≈ (1 + 2k/L) for a line and
+≈ (1 + 2k/L)² and more for a quadratic, whose curvature then fits the bias, not the stripe.
+The quadratic added 30 gross centres on 7 of the 160 development frame-stripes (seeds
+7576–7577, 7583–7585, 7800–7804, frames 0–7; 0.6–15 px from the border, 0.9–3.7 px off): where
+the truth is straight, the line through the same support was 0.02–0.4 px off (roll35/sunny V
+7576/3: quadratic 1.20 px, line 0.02 px at k = 27; roll45/saturated H 7585/1: 1.7 vs 0.4 px at
+k = 22); where the truth bends beyond the path's centres (roll35/saturated V 7577/5, k 36–44;
+roll45/saturated V 7802/1), the line's zone test rejects the end the quadratic's passed. The
+truth is nearly straight at most ends: over the 205 qualifying ends (slope, support) of those
+frames the median |quadratic term| of the true centres is 1.7e-5 px per centre², and a line
+through them meets the truth at the border within 0.01 px (median); the ends that do bend (10
+%, by ≥ 1.1 px: surface corners, T-junctions) are the zone test's. Tried, not kept (seeds
+7576–7577 and 7583–7585, frames 0–7; gross added, detection against the line's): the quadratic
+with its extrapolation cut where it leaves the line by > 0.5 px (0 added, 0–0.9 % less), or
+within 0.5 / 0.7 × L of the support (0 / 1 added, 0.1–4.1 % less), or a zone test on the
+zone's 5 centres nearest the border (roll35/saturated V still 5 → 11); a 60-centre support
+(roll45/saturated H 0 → 3); the line with the 0.5 px cut, the 5-centre zone test at 0.15 px or
+a zone of ≥ 3 centres required (also 7800–7804: 0 added either way, 0–1.4 % less); a centre
+re-measured on the image along the border-parallel axis (a half-maximum centroid of the raw
+image's column at the extrapolated position: 0.28 px median disagreement on centres whose fit
+was within 0.3 px, too noisy to gate by).
 
 Evidence: the module docstring of `experiments/ood_extraction.py`.
 """
@@ -47,7 +71,7 @@ __all__ = ["FIT_WIDTHS", "MIN_SLOPE", "extend"]
 FIT_WIDTHS = 2.5
 FIT_PX = 2.0
 FIT_LEN = 30
-FIT_DEG = 2
+FIT_DEG = 1
 #: Largest median distance (px) of the path's own centres nearer the border from the fit.
 ZONE_TOL = 0.3
 #: Smallest |slope| (px across per centre) of that line: a stripe that meets the border

@@ -13,7 +13,9 @@ def _stripe(end: float = -np.inf):
     """Image (N, M) of a stripe of slope 1.05 (s 2 px) lit where along ≥ `end`, its true
     centres, and a path that lost the centres within 12 px of the border across."""
     j = np.arange(N, dtype=float)
-    true = 0.3 + 1.05 * (j - 40.0) + 0.0004 * (j - 40.0) ** 2  # curved a little (the lens)
+    # curved a little: 2e-5 px per centre², the median of the truth's quadratic term over the
+    # ends extended on the development frames (1.7e-5; `border`'s docstring)
+    true = 0.3 + 1.05 * (j - 40.0) + 0.00002 * (j - 40.0) ** 2
     across = np.arange(M, dtype=float)
     img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
     img[j < end] = 5.0
@@ -48,3 +50,38 @@ def test_a_fan_ending_before_the_border_is_not_extended_past_its_end():
     img[hole] = 0.0
     p, v, _, _ = border.extend(pos, valid, sig, z, img, hole, 3.0)
     assert v[(true >= 0) & (true <= M - 1)].all()
+
+
+def test_a_bias_on_the_support_is_not_amplified_into_a_gross_centre():
+    """The path's centres on the support carry a smooth 0.2 px hump (the bias a sunny or cut
+    profile leaves; development frames: up to 0.31 px), the stripe itself is straight: a
+    quadratic through them ends 1.6 px off at the border 30 centres out, the line 0.1 px."""
+    j = np.arange(N, dtype=float)
+    true = 0.3 + 0.4 * (j - 40.0)  # meets the border across at along 39
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (true > 12) & (true < M - 13)  # the path lost the 12 px next to the border
+    support = valid & (j < 100)  # its first 30 centres, along 70–99
+    pos = np.where(valid, true + np.where(support, 0.2 * np.sin(np.pi * (j - 70) / 30), 0), np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    new = v & ~valid
+    assert new.sum() >= 25  # extended to the border
+    assert np.abs(p - true)[new].max() < 0.3
+
+
+def test_a_bend_between_the_support_and_the_border_leaves_the_end_as_it_was():
+    """The stripe turns (a surface corner) 7.7 px from the border, and the path's own centres
+    follow it there: the line through the support does not carry over (the zone test)."""
+    j = np.arange(N, dtype=float)
+    true = 0.3 + 1.05 * (j - 40.0)
+    true = np.where(j < 47, true[47] + 0.5 * (j - 47), true)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (true > 3) & (true < M - 4)
+    pos = np.where(valid, true, np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    low = j < 100  # the end at across 0 (the other end, straight, is extended as usual)
+    assert np.array_equal(v[low], valid[low])
+    assert np.allclose(p[low & v], pos[low & v])
