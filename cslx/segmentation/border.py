@@ -18,7 +18,11 @@ below) through the next `FIT_LEN` centres inside, out to the border (`MARGIN`), 
 - the fit's slope is at least `MIN_SLOPE` (the stripe meets the border obliquely; an aligned
   stripe's ends are left alone, so the default rig's frames do not change);
 - the fit meets the border within `REACH` × that distance of its support (a path ending far
-  from the border is a fan's end, `ends` and `orient.trim_ends` handle those);
+  from the border is a fan's end, `ends` and `orient.trim_ends` handle those), and before the
+  frame's end along: a path that ends at the border along has whole profiles there (before
+  this check, roll35/saturated H 7809/3 was followed 60–70 px from the border across over
+  the 11 columns next to the left border, 8 gross centres: the support's slope 0.74, the
+  truth's ≈ 0.6);
 - the path's own centres nearer the border lie within `ZONE_TOL` px of the fit (median): a
   surface corner between the support and the border (roll35/saturated V, seed 7577, frames
   1, 3 and 7: slope 0.75 inside, 0.52 beyond row 61) put the extrapolation 1–3.4 px off, 15–17
@@ -117,8 +121,10 @@ def _end(pos, valid, img, clipped, img_shape, width, reverse: bool):
             return None  # a corner between: the fit does not carry over (module docstring)
     step = -1 if reverse else 1
     reach = int(np.ceil((REACH * d + 1.0) / abs(b))) + 1  # centres to the border, at most
-    q_out = np.polyval(coef, -step * reach)
-    if 0 <= support[0] - step * reach < n and 0 <= q_out <= m - 1:
+    # where the reach runs past the frame along, the line must have left it across by the
+    # frame's end: else the path ends at the border along (intact profiles, not cut ones)
+    j_out = int(np.clip(support[0] - step * reach, 0, n - 1))
+    if 0 <= np.polyval(coef, j_out - support[0]) <= m - 1:
         return None  # the line does not meet the border across within the reach
     img, clipped = img(), clipped()  # only now on the host (a turned stripe at the border)
     plateau = np.median(_sample(img, support, pos[support]))

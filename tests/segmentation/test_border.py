@@ -85,3 +85,20 @@ def test_a_bend_between_the_support_and_the_border_leaves_the_end_as_it_was():
     low = j < 100  # the end at across 0 (the other end, straight, is extended as usual)
     assert np.array_equal(v[low], valid[low])
     assert np.allclose(p[low & v], pos[low & v])
+
+
+def test_a_path_ending_at_the_border_along_is_not_extended():
+    """The path lost its first 30 centres, where the stripe (10–25 px from the border across)
+    runs to the frame's end along: its profiles are whole there, so the loss is not the
+    border's cut and the line is not followed (development frame 7809/3 H: 8 gross centres
+    60–70 px from the border across, the support's slope 0.74 against the truth's 0.6)."""
+    j = np.arange(N, dtype=float)
+    true = 60.0 + 0.5 * (j - 100.0)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (j >= 30) & (true < M - 13)
+    pos = np.where(valid, true, np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    assert not v[:30].any()
+    assert np.array_equal(v, valid)  # the other end leaves along too (at 109.5 px across)
