@@ -236,6 +236,57 @@ slightly higher errors (medians +0–0.003 mm), and the rest of the misses (fans
 the border along, clipped pixels). Merged off (`cslx.segmentation.robust.BORDER`): the held-out
 gross centres (0 → 2 clean V, 0 → 8 sunny V) break the gross goal that the 45° frames met
 without it; detection there stays 94.7–98.9 % until the extension adds no gross centre.
+
+The border extension's gross centres (branch border11b; `border.extend` replayed on the inputs
+recorded from `extract` with `BORDER` on, so off and on score the same frames in one process).
+Development: seeds 7576–7577 and 7583–7585 (frames 0–7), fresh 7800–7804 (frames 0–7) and
+7806–7809 (saturated only, frames 0–7). The quadratic added 78 gross centres (summed over the
+conditions); those examined (7 frame-stripes, 0.6–15 px from the border across) were one of:
+(1) its curvature fitted the support's 0.1–0.3 px bias and was extrapolated 21–44 centres, the
+line through the same support 0.02–0.4 px off; (2) the truth bends between the support and the
+border (surface corners, T-junctions; 10 % of the 205 qualifying ends bend by ≥ 1.1 px) and
+the quadratic passed the zone test there; (3), found with the line: a path ending at the
+border along (its profiles whole), followed 60–70 px from the border across (7809/3 H). Now: a
+line (`border.FIT_DEG` 1; the zone test rejects case 2 where the path's own centres show the
+bend) and the fit must leave the frame across before its end along. Detection %, gross count,
+median / p95 mm, off → quadratic → line (pooled 16 frames a condition, 32 for the saturated
+ones): roll45/clean H 98.63 → 99.72 → 99.70, 0 → 0 → 0, 0.0357 / 0.188 → 0.0360 / 0.186 →
+0.0354 / 0.186; V 98.42 → 99.52 → 99.39, 2 → 2 → 2, 0.0263 / 0.133 → 0.0267 / 0.141 → 0.0263 /
+0.126; roll45/sunny H 98.52 → 99.86 → 99.83, 0 → 0 → 0; V 97.36 → 98.89 → 98.76, 2 → 2 → 2;
+roll45/saturated H 96.77 → 99.67 → 99.54, 26 → 35 → 23; V 95.36 → 99.84 → 99.34, 2 → 21 → 16,
+0.0373 / 0.215 → 0.0379 / 0.238 → 0.0378 / 0.214; roll35/sunny H 98.86 → 99.72 → 99.66, 0 → 0
+→ 0; V 98.29 → 99.04 → 98.86, 1 → 7 → 0; roll35/saturated H 97.26 → 99.72 → 99.16, 11 → 11 →
+11; V 95.88 → 98.53 → 98.50, 5 → 49 → 5. What the line still adds (14, all on 7808/3 V): the
+truth bends ≈ 26 rows before the border (slope 0.82 → 0.67) and the path's own centres there
+follow the line, not the bend (they are smoothed along the path), up to 1.1 px off before the
+extension and up to 2.7 px after; the zone test cannot see that. Held out, once per set
+(frames 0–3; detection %, gross count, median / p95 mm, off → quadratic → line):
+- `--seed 7827` / `7847` (roll45 7850–7852, roll35 7853–7854), the final line with the
+  along check: roll45/clean H 98.98 → 99.89 → 99.89, 0 → 0 → 0; V 98.36 → 99.78 → 99.41,
+  0 → 5 → 0, 0.0349 / 0.153 → 0.0353 / 0.170 → 0.0349 / 0.147; roll45/sunny H 98.86 → 100.00
+  → 99.83, 0 → 0 → 0; V 97.66 → 98.64 → 98.57, 322 → 322 → 322 (one frame's path on the wrong
+  stripe, with or without the extension); roll45/saturated H 96.48 → 99.83 → 99.89, 2 → 0 →
+  2; V 95.53 → 99.70 → 98.51, 0 → 7 → 8, 0.0373 / 0.123 → 0.0398 / 0.191 → 0.0384 / 0.143;
+  roll35/sunny H 98.52 → 99.70 → 99.70, 6 → 6 → 6; V 98.09 → 99.33 → 99.38, 0 → 0 → 0;
+  roll35/saturated H 97.11 → 99.87 → 99.70, 1 → 1 → 1; V 95.81 → 97.49 → 97.43, 0 → 21 → 22,
+  0.0271 / 0.143 → 0.0280 / 0.203 → 0.0288 / 0.140 (the line before the along check
+  differed only in roll35/saturated H 99.87 % and roll45/sunny V 98.72 %; this set was
+  scored with it first, then the along check came from 7806–7809).
+- `--seed 7837` / `7857` (roll45 7860–7862, roll35 7863–7864), the final line with the along
+  check: roll45/clean H 98.58 → 99.43 → 99.38, 0 → 0 → 0; V 98.29 → 99.85 → 99.48, 0 → 0 →
+  0, 0.0233 / 0.088 → 0.0234 / 0.092 → 0.0230 / 0.083; roll45/sunny H 98.59 → 99.49 → 99.77,
+  0 → 0 → 0; V 97.72 → 99.93 → 99.78, 0 → 3 → 8, 0.0350 / 0.134 → 0.0344 / 0.152 → 0.0353 /
+  0.162; roll45/saturated H 96.30 → 99.88 → 99.88, 7 → 7 → 7; V 95.08 → 99.77 → 99.69, 1 →
+  1 → 2; roll35/sunny H 98.90 → 99.91 → 99.96, 0 → 0 → 0; V 98.29 → 99.89 → 99.43, 0 → 0 →
+  0; roll35/saturated H 97.43 → 99.83 → 99.69, 0 → 0 → 0; V 95.66 → 99.72 → 98.70, 0 → 15 →
+  0, 0.0357 / 0.161 → 0.0367 / 0.223 → 0.0357 / 0.172.
+The line adds fewer gross centres than the quadratic (development 78 → 14, held out 33 → 30
+and 18 → 9) but not none: the vertical stripe's ends (roll45/saturated, roll45/sunny,
+roll35/saturated) still get 1–22 a condition, so `BORDER` stays off. What is left needs the
+image, not the path: a centre re-measured near the border (a half-maximum centroid of the raw
+column was 0.28 px off where the fit was right, too noisy; the mask `extend` gets holds only the
+clipped pixels left unfilled (`robust._prepare`), not the whole core: its band's middle was
+3.5 px off, no centre either).
 """
 
 from __future__ import annotations

@@ -61,6 +61,11 @@ re-measured on the image along the border-parallel axis (a half-maximum centroid
 image's column at the extrapolated position: 0.28 px median disagreement on centres whose fit
 was within 0.3 px, too noisy to gate by).
 
+Not yet enough: the line adds fewer gross centres than the quadratic but not none (development
+78 → 14, all 14 on one frame, 7808/3 V; held out 33 → 30 and 18 → 9, on the vertical stripe's
+ends): where the truth bends before the border, the path's own centres there are smoothed onto
+the straight trend and the zone test passes. So `robust.BORDER` stays off.
+
 Evidence: the module docstring of `experiments/ood_extraction.py`.
 """
 

@@ -457,7 +457,9 @@ CROSSING = EDGE_DROP = True
 #: the rows and columns but added up to 8 gross (> 1 mm) centres a stripe where there were
 #: none (sunny V, 4 frames; roll35 saturated V on development frames 5 → 11), and medians /
 #: p95 rose a little (`experiments/ood_extraction.py`); issue 11 counts a gross centre as
-#: worse than a missing one, whatever reads the centres downstream.
+#: worse than a missing one, whatever reads the centres downstream. With a line instead of the
+#: quadratic (branch border11b) it still adds 1–22 a condition on the held-out vertical
+#: stripes (two sets of 20 frames: 30 and 9, the quadratic 33 and 18; `border`).
 BORDER = False
 #: Drop the first pass's tail past a turned stripe's end inside the frame (`ends`), step 5.
 END_TRIM = True
