@@ -102,3 +102,22 @@ def test_a_path_ending_at_the_border_along_is_not_extended():
     p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
     assert not v[:30].any()
     assert np.array_equal(v, valid)  # the other end leaves along too (at 109.5 px across)
+
+
+def test_a_bend_the_path_smoothed_away_is_seen_on_the_image_along_the_border():
+    """The stripe turns 30 centres before the border (slope 1.05 → 0.95) but the path's own
+    centres follow the straight trend (smoothed along the path): the line would end 1.9–3.0
+    px off, which the profiles along the border show (development frame 7808/3 V: 14 gross
+    centres, up to 2.7 px off, with the zone test passed)."""
+    j = np.arange(N, dtype=float)
+    line = 0.3 + 1.05 * (j - 40.0)
+    true = np.where(j < 70, line[70] + 0.95 * (j - 70), line)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 4.0) ** 2)
+    valid = (line > 12) & (line < M - 13)
+    pos = np.where(valid, line, np.nan)  # the path: straight through the bend
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 5.0)
+    low = j < 100
+    assert not (v & ~valid)[low].any()  # nothing set past the path's end at across 0
+    assert (v & ~valid)[~low].any()  # the other, straight end is extended as usual
