@@ -236,6 +236,85 @@ slightly higher errors (medians +0–0.003 mm), and the rest of the misses (fans
 the border along, clipped pixels). Merged off (`cslx.segmentation.robust.BORDER`): the held-out
 gross centres (0 → 2 clean V, 0 → 8 sunny V) break the gross goal that the 45° frames met
 without it; detection there stays 94.7–98.9 % until the extension adds no gross centre.
+
+The border extension's gross centres (branch border11b; `border.extend` replayed on the inputs
+recorded from `extract` with `BORDER` on, so off and on score the same frames in one process).
+Development: seeds 7576–7577 and 7583–7585 (frames 0–7), fresh 7800–7804 (frames 0–7) and
+7806–7809 (saturated only, frames 0–7). The quadratic added 78 gross centres (summed over the
+conditions); those examined (7 frame-stripes, 0.6–15 px from the border across) were one of:
+(1) its curvature fitted the support's 0.1–0.3 px bias and was extrapolated 21–44 centres, the
+line through the same support 0.02–0.4 px off; (2) the truth bends between the support and the
+border (surface corners, T-junctions; 10 % of the 205 qualifying ends bend by ≥ 1.1 px) and
+the quadratic passed the zone test there; (3), found with the line: a path ending at the
+border along (its profiles whole), followed 60–70 px from the border across (7809/3 H). Now: a
+line (`border.FIT_DEG` 1; the zone test rejects case 2 where the path's own centres show the
+bend) and the fit must leave the frame across before its end along. Detection %, gross count,
+median / p95 mm, off → quadratic → line (pooled 16 frames a condition, 32 for the saturated
+ones): roll45/clean H 98.63 → 99.72 → 99.70, 0 → 0 → 0, 0.0357 / 0.188 → 0.0360 / 0.186 →
+0.0354 / 0.186; V 98.42 → 99.52 → 99.39, 2 → 2 → 2, 0.0263 / 0.133 → 0.0267 / 0.141 → 0.0263 /
+0.126; roll45/sunny H 98.52 → 99.86 → 99.83, 0 → 0 → 0; V 97.36 → 98.89 → 98.76, 2 → 2 → 2;
+roll45/saturated H 96.77 → 99.67 → 99.54, 26 → 35 → 23; V 95.36 → 99.84 → 99.34, 2 → 21 → 16,
+0.0373 / 0.215 → 0.0379 / 0.238 → 0.0378 / 0.214; roll35/sunny H 98.86 → 99.72 → 99.66, 0 → 0
+→ 0; V 98.29 → 99.04 → 98.86, 1 → 7 → 0; roll35/saturated H 97.26 → 99.72 → 99.16, 11 → 11 →
+11; V 95.88 → 98.53 → 98.50, 5 → 49 → 5. What the line still adds (14, all on 7808/3 V): the
+truth bends ≈ 26 rows before the border (slope 0.82 → 0.67) and the path's own centres there
+follow the line, not the bend (they are smoothed along the path), up to 1.1 px off before the
+extension and up to 2.7 px after; the zone test cannot see that. Held out, once per set
+(frames 0–3; detection %, gross count, median / p95 mm, off → quadratic → line):
+- `--seed 7827` / `7847` (roll45 7850–7852, roll35 7853–7854), the final line with the
+  along check: roll45/clean H 98.98 → 99.89 → 99.89, 0 → 0 → 0; V 98.36 → 99.78 → 99.41,
+  0 → 5 → 0, 0.0349 / 0.153 → 0.0353 / 0.170 → 0.0349 / 0.147; roll45/sunny H 98.86 → 100.00
+  → 99.83, 0 → 0 → 0; V 97.66 → 98.64 → 98.57, 322 → 322 → 322 (one frame's path on the wrong
+  stripe, with or without the extension); roll45/saturated H 96.48 → 99.83 → 99.89, 2 → 0 →
+  2; V 95.53 → 99.70 → 98.51, 0 → 7 → 8, 0.0373 / 0.123 → 0.0398 / 0.191 → 0.0384 / 0.143;
+  roll35/sunny H 98.52 → 99.70 → 99.70, 6 → 6 → 6; V 98.09 → 99.33 → 99.38, 0 → 0 → 0;
+  roll35/saturated H 97.11 → 99.87 → 99.70, 1 → 1 → 1; V 95.81 → 97.49 → 97.43, 0 → 21 → 22,
+  0.0271 / 0.143 → 0.0280 / 0.203 → 0.0288 / 0.140 (the line before the along check
+  differed only in roll35/saturated H 99.87 % and roll45/sunny V 98.72 %; this set was
+  scored with it first, then the along check came from 7806–7809).
+- `--seed 7837` / `7857` (roll45 7860–7862, roll35 7863–7864), the final line with the along
+  check: roll45/clean H 98.58 → 99.43 → 99.38, 0 → 0 → 0; V 98.29 → 99.85 → 99.48, 0 → 0 →
+  0, 0.0233 / 0.088 → 0.0234 / 0.092 → 0.0230 / 0.083; roll45/sunny H 98.59 → 99.49 → 99.77,
+  0 → 0 → 0; V 97.72 → 99.93 → 99.78, 0 → 3 → 8, 0.0350 / 0.134 → 0.0344 / 0.152 → 0.0353 /
+  0.162; roll45/saturated H 96.30 → 99.88 → 99.88, 7 → 7 → 7; V 95.08 → 99.77 → 99.69, 1 →
+  1 → 2; roll35/sunny H 98.90 → 99.91 → 99.96, 0 → 0 → 0; V 98.29 → 99.89 → 99.43, 0 → 0 →
+  0; roll35/saturated H 97.43 → 99.83 → 99.69, 0 → 0 → 0; V 95.66 → 99.72 → 98.70, 0 → 15 →
+  0, 0.0357 / 0.161 → 0.0367 / 0.223 → 0.0357 / 0.172.
+The line adds fewer gross centres than the quadratic (development 78 → 14, held out 33 → 30
+and 18 → 9) but not none: the vertical stripe's ends (roll45/saturated, roll45/sunny,
+roll35/saturated) still got 1–22 a condition. What was left needed the image, not the path:
+the extension now ends where the stripe measured on the profiles along the border (whole
+there; a half-maximum centroid per centre, 0.28 px median off where the line was right, so
+averaged over 12 centres) leaves the line by > 1.5 px (`border.MEASURE_TOL`). Development
+(same frames as above, off → line → line with the image check): gross roll45/saturated H 26
+→ 23 → 18, V 2 → 16 → 0, detection V 95.36 → 99.34 → 99.08, H 96.77 → 99.54 → 99.40 %; every
+other condition as with the line alone (roll45/clean, roll45/sunny, roll35/* identical). The
+mask `extend` gets holds only the clipped pixels left unfilled (`robust._prepare`), not the
+whole core, so a clipped band is no centre (its middle 3.5 px off). Held out on seeds never
+looked at before, once: `--seed 7847` / `7867` (roll45 7870–7872, roll35 7873–7874), frames
+0–3, off → quadratic → final (detection %, gross count, median / p95 mm): roll45/clean H
+98.97 → 99.77 → 99.83, 0 → 0 → 0, 0.0475 / 0.209 → 0.0476 / 0.209 → 0.0480 / 0.209; V 97.91
+→ 99.03 → 98.51, 0 → 1 → 0, 0.0213 / 0.119 → 0.0219 / 0.119 → 0.0212 / 0.111; roll45/sunny
+H 98.52 → 99.83 → 99.83, 0 → 0 → 0, 0.0511 / 0.252 → 0.0519 / 0.260 → 0.0511 / 0.270; V
+97.31 → 98.65 → 98.13, 0 → 0 → 0, 0.0339 / 0.217 → 0.0358 / 0.210 → 0.0337 / 0.206;
+roll45/saturated H 96.79 → 100.00 → 99.71, 0 → 0 → 0, 0.0360 / 0.223 → 0.0355 / 0.265 →
+0.0367 / 0.218; V 95.36 → 99.85 → 99.77, 0 → 0 → 0, 0.0429 / 0.206 → 0.0435 / 0.247 → 0.0444
+/ 0.189; roll35/sunny H 99.26 → 100.00 → 99.96, 0 → 0 → 0, 0.0388 / 0.156 → 0.0395 / 0.157 →
+0.0395 / 0.150; V 98.27 → 99.89 → 99.44, 0 → 5 → 0, 0.0335 / 0.194 → 0.0344 / 0.221 → 0.0331
+/ 0.216; roll35/saturated H 96.68 → 99.91 → 98.66, 2 → 2 → 2, 0.0373 / 0.211 → 0.0378 / 0.225
+→ 0.0366 / 0.226; V 95.82 → 99.51 → 98.74, 0 → 9 → 0, 0.0354 / 0.155 → 0.0366 / 0.214 →
+0.0354 / 0.144 (`main` itself, `--seed 7847`, roll45/sunny and roll45/saturated, `BORDER` on:
+the same figures, so the replay is the pipeline; the recorded outputs also equal the replayed
+ones bit for bit on all 200 recorded frame-stripes checked). The final code on the two
+earlier held-out sets (looked at before the image
+check, so not clean): 7850–7854, gross added 0 (roll35/saturated V 95.81 → 95.98 %,
+roll45/saturated V 95.53 → 96.05 %: the check ends most of those extensions; roll45/saturated
+H 99.77 %; the other condition-stripes as the line's above); 7860–7864, 1 added
+(roll45/saturated V 7862/3, 0.1 px from the border, 1.0 mm off; 1 → 2 gross, 99.69 %),
+roll45/sunny V 99.12 % with 0 gross (the line's 8 gone), H 99.72 %, roll45/saturated H
+99.48 %, the rest as the line's above. So `robust.BORDER` is on. Development benchmark
+(`robust_extraction`'s 18 conditions, seeds 7100–7117, frame 0, both stripes): `extend`
+returns its inputs unchanged on all 36 frame-stripes (no end qualifies), so bit-identical.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ biased columns just outside). On every audit frame (seed 7400 + condition, 12 co
 the stripe are dropped (audit, 35° turned cross, sunny: 16–17 false centres a frame at
 u ≈ 639, and the path bent onto them, 1.2–2.9 px off over 10 rows), and those within
 `CUT_WIDTHS` σ_t of it are interpolated (their profile is cut). With
-`cslx.segmentation.robust.BORDER` (off by default) a turned stripe's centres near the border
+`cslx.segmentation.robust.BORDER` (on by default) a turned stripe's centres near the border
 come back at the end from the fit through those inside (`border`).
 
 The caller (`cslx.segmentation.robust`, step 7) excludes the flagged centres from the second

@@ -137,11 +137,11 @@ averages out): the goal's median is near that floor even without speckle.
    (σ ≤ 0.33 px, strength ≥ 12, over half the columns) or a strong one (strength ≥ 60,
    σ ≤ 1.5 px: a turned cross's first pass is rough); no laser-on development frame
    changes (bit-identical).
-9. The border (`cslx.segmentation.border`, `BORDER`, off by default: it adds gross centres,
-   see the flag): a turned stripe's ends that leave the frame across the search axis are set
-   by a quadratic through the centres further inside, up to the border, while the image
-   there is lit (a rolled cross lost 4–16 centres a frame and stripe there); aligned stripes
-   are untouched (development benchmark bit-identical).
+9. The border (`cslx.segmentation.border`, `BORDER`): a turned stripe's ends that leave the
+   frame across the search axis are set by a line through the centres further inside, up to
+   the border, while the image there is lit and agrees with the line (a rolled cross lost
+   4–16 centres a frame and stripe there); aligned stripes are untouched (development
+   benchmark bit-identical).
 Cost per frame and stripe: results/robust_extraction.md (the old default's in the same run).
 """
 
@@ -453,12 +453,13 @@ REFINE = True
 #: Interpolate centres at a turned crossing or cut by the border; drop border ones (`crossing`).
 CROSSING = EDGE_DROP = True
 #: Set a turned stripe's centres near the border it leaves the frame by from a fit through
-#: those inside (`border`), step 9. Off: on the held-out 45° frames it recovered 0.9–4.4 % of
-#: the rows and columns but added up to 8 gross (> 1 mm) centres a stripe where there were
-#: none (sunny V, 4 frames; roll35 saturated V on development frames 5 → 11), and medians /
-#: p95 rose a little (`experiments/ood_extraction.py`); issue 11 counts a gross centre as
-#: worse than a missing one, whatever reads the centres downstream.
-BORDER = False
+#: those inside (`border`), step 9. Its first form (a quadratic) added gross (> 1 mm)
+#: centres (held out 33, 18 and 15 on three sets of 20 frames); the line with the check
+#: against the image along the border (branch border11b) adds none on the fresh held-out set
+#: (seeds 7870–7874, frames 0–3) and recovers 0.6–4.4 % of the rows and columns there (every
+#: condition rises; `experiments/ood_extraction.py`); issue 11 counts a gross centre as worse
+#: than a missing one. The development benchmark (18 conditions, 7100–7117) is bit-identical.
+BORDER = True
 #: Drop the first pass's tail past a turned stripe's end inside the frame (`ends`), step 5.
 END_TRIM = True
 #: Smooth and link a stripe turned ≥ `orient.MIN_DEG` from its axis along it (`orient`), step 3.

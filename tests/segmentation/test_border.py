@@ -13,7 +13,9 @@ def _stripe(end: float = -np.inf):
     """Image (N, M) of a stripe of slope 1.05 (s 2 px) lit where along ≥ `end`, its true
     centres, and a path that lost the centres within 12 px of the border across."""
     j = np.arange(N, dtype=float)
-    true = 0.3 + 1.05 * (j - 40.0) + 0.0004 * (j - 40.0) ** 2  # curved a little (the lens)
+    # curved a little: 2e-5 px per centre², the median of the truth's quadratic term over the
+    # ends extended on the development frames (1.7e-5; `border`'s docstring)
+    true = 0.3 + 1.05 * (j - 40.0) + 0.00002 * (j - 40.0) ** 2
     across = np.arange(M, dtype=float)
     img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
     img[j < end] = 5.0
@@ -48,3 +50,74 @@ def test_a_fan_ending_before_the_border_is_not_extended_past_its_end():
     img[hole] = 0.0
     p, v, _, _ = border.extend(pos, valid, sig, z, img, hole, 3.0)
     assert v[(true >= 0) & (true <= M - 1)].all()
+
+
+def test_a_bias_on_the_support_is_not_amplified_into_a_gross_centre():
+    """The path's centres on the support carry a smooth 0.2 px hump (the bias a sunny or cut
+    profile leaves; development frames: up to 0.31 px), the stripe itself is straight: a
+    quadratic through them ends 1.6 px off at the border 30 centres out, the line 0.1 px."""
+    j = np.arange(N, dtype=float)
+    true = 0.3 + 0.4 * (j - 40.0)  # meets the border across at along 39
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (true > 12) & (true < M - 13)  # the path lost the 12 px next to the border
+    support = valid & (j < 100)  # its first 30 centres, along 70–99
+    pos = np.where(valid, true + np.where(support, 0.2 * np.sin(np.pi * (j - 70) / 30), 0), np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    new = v & ~valid
+    assert new.sum() >= 25  # extended to the border
+    assert np.abs(p - true)[new].max() < 0.3
+
+
+def test_a_bend_between_the_support_and_the_border_leaves_the_end_as_it_was():
+    """The stripe turns (a surface corner) 7.7 px from the border, and the path's own centres
+    follow it there: the line through the support does not carry over (the zone test)."""
+    j = np.arange(N, dtype=float)
+    true = 0.3 + 1.05 * (j - 40.0)
+    true = np.where(j < 47, true[47] + 0.5 * (j - 47), true)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (true > 3) & (true < M - 4)
+    pos = np.where(valid, true, np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    low = j < 100  # the end at across 0 (the other end, straight, is extended as usual)
+    assert np.array_equal(v[low], valid[low])
+    assert np.allclose(p[low & v], pos[low & v])
+
+
+def test_a_path_ending_at_the_border_along_is_not_extended():
+    """The path lost its first 30 centres, where the stripe (10–25 px from the border across)
+    runs to the frame's end along: its profiles are whole there, so the loss is not the
+    border's cut and the line is not followed (development frame 7809/3 H: 8 gross centres
+    60–70 px from the border across, the support's slope 0.74 against the truth's 0.6)."""
+    j = np.arange(N, dtype=float)
+    true = 60.0 + 0.5 * (j - 100.0)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 2.0) ** 2)
+    valid = (j >= 30) & (true < M - 13)
+    pos = np.where(valid, true, np.nan)
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 3.0)
+    assert not v[:30].any()
+    assert np.array_equal(v, valid)  # the other end leaves along too (at 109.5 px across)
+
+
+def test_a_bend_the_path_smoothed_away_is_seen_on_the_image_along_the_border():
+    """The stripe turns 30 centres before the border (slope 1.05 → 0.95) but the path's own
+    centres follow the straight trend (smoothed along the path): the line would end 1.9–3.0
+    px off, which the profiles along the border show (development frame 7808/3 V: 14 gross
+    centres, up to 2.7 px off, with the zone test passed)."""
+    j = np.arange(N, dtype=float)
+    line = 0.3 + 1.05 * (j - 40.0)
+    true = np.where(j < 70, line[70] + 0.95 * (j - 70), line)
+    across = np.arange(M, dtype=float)
+    img = 5.0 + 100.0 * np.exp(-0.5 * ((across[None, :] - true[:, None]) / 4.0) ** 2)
+    valid = (line > 12) & (line < M - 13)
+    pos = np.where(valid, line, np.nan)  # the path: straight through the bend
+    sig, z = np.full(N, 0.05), np.full(N, 50.0)
+    p, v, _, _ = border.extend(pos, valid, sig, z, img, np.zeros(img.shape, bool), 5.0)
+    low = j < 100
+    assert not (v & ~valid)[low].any()  # nothing set past the path's end at across 0
+    assert (v & ~valid)[~low].any()  # the other, straight end is extended as usual
