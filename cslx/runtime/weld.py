@@ -57,7 +57,7 @@ import jax.numpy as jnp
 
 from ..pytree import pytree_dataclass, static
 from .bead_run import largest_run as _largest_run
-from .bead_run import plate_points
+from .bead_run import plate_points, steep_points
 from .small_ops import masked_median, one_function, solve_spd
 from .vertical_heading import heading_from_vertical
 
@@ -113,6 +113,8 @@ class WeldConfig:
         point below the plate by more than `threshold_mm` is no plate point
         (`cslx.runtime.bead_run.plate_points`); 0 (off) here, the tracker's in
         `tracking_config`.
+    cap_slope_weight / cap_slope_factor: < 1: points steeper than factor × the cap's toe
+        weigh this in its fit (`bead_run.steep_points`); off (1) here and in the tracker.
     """
 
     threshold_mm: float = 0.3
@@ -135,6 +137,8 @@ class WeldConfig:
     n_cap: int = static(8)
     side_cover_power: float = static(0.0)
     min_plate_mm: float = static(0.0)
+    cap_slope_weight: float = static(1.0)
+    cap_slope_factor: float = 1.5
 
 
 class WeldFeature(NamedTuple):
@@ -316,13 +320,13 @@ def _cap_model(p, t):
     return jnp.where(inside, top, 0.0)
 
 
-def _cap_fit(t, h, w, p0, sigma, n_iter):
+def _cap_fit(t, h, w, p0, sigma, n_iter, extra=None):
     """The cap (a, c, H) that best explains the heights h(t), plate points included.
 
     Gauss–Newton on the vertical residuals with Tukey weights (scale 1.4826·MAD, at least
     2σ): a point of the plate where the cap would stand counts against it, a stretch of the
     profile that is missing (a glint) counts for nothing, and points that no cap explains
-    (a centre on the wrong ridge) lose their weight.
+    (a centre on the wrong ridge) lose their weight. ``extra(p)``: more weights per step.
     """
 
     def res(p):
@@ -334,6 +338,7 @@ def _cap_fit(t, h, w, p0, sigma, n_iter):
         scale = jnp.maximum(1.4826 * _masked_median(jnp.abs(r), w > 0), 2.0 * sigma)
         u = r / (4.685 * scale)
         wr = w * jnp.square(jnp.clip(1.0 - u * u, 0.0, 1.0))
+        wr = wr if extra is None else wr * extra(p)
         J = -jax.jacfwd(_cap_model)(p, t)
         step = _wls(J, -res(p), wr, 1e-6)
         new = p + jnp.clip(step, -2.0, 2.0)
@@ -477,6 +482,9 @@ def _bead(P, s, s_mean, q, *, valid, axis, config: WeldConfig, weights) -> WeldF
     w_cap = near.astype(dtype)
     if weights is not None:
         w_cap = w_cap * jnp.asarray(weights, dtype)
+    extra = None  # points steeper than the cap's toe (`steep_points`)
+    if config.cap_slope_weight != 1.0:
+        extra = steep_points(t, h, valid, config.cap_slope_factor, config.cap_slope_weight)
     p_cap, _ = _cap_fit(
         jnp.where(near, t, 0.0),
         jnp.where(near, h, 0.0),
@@ -484,6 +492,7 @@ def _bead(P, s, s_mean, q, *, valid, axis, config: WeldConfig, weights) -> WeldF
         jnp.stack([a, half0, jnp.clip(height, 0.1, 10.0)]),
         sigma,
         config.n_cap,
+        extra,
     )
     ok_cap = jnp.all(jnp.isfinite(p_cap)) & (jnp.abs(p_cap[0] - a) < half0)
     t_cap = jnp.where(ok_cap, p_cap[0], a)

@@ -435,3 +435,59 @@ def test_dip_inside_the_bead_does_not_split_it():
     args = jnp.asarray(pts, jnp.float32), jnp.asarray(valid)
     a, b = feature(*args, 1, WeldConfig()), feature(*args, 1, WeldConfig(min_plate_mm=1.0))
     np.testing.assert_allclose(float(a.position), float(b.position), atol=1e-4)
+
+
+# Rendered sun, dev seed 7302 flank, frame 5 (`experiments/bead_refit.py`): the horizontal
+# stripe's points within 16 mm of the true weld line (y_r from it, z_r), the bead 12.4 mm
+# wide, 1.52 high. The sunlit flank (y 3.4–6.6 mm) has no points; the last ones before the
+# gap rise from +0.07 to +1.63 mm over 0.9 mm (the true cap is 0 there). Their weights: 1,
+# but 0.1 on the two nearest the gap (a clipped run).
+# fmt: off
+SUN_Y = [  # mm from the true centre line
+    15.84, 15.59, 15.34, 15.08, 14.83, 14.58, 14.33, 14.08, 13.83, 13.57, 13.32,
+    13.06, 12.81, 12.55, 12.29, 12.02, 11.77, 11.51, 11.25, 11, 10.75, 10.5,
+    10.25, 10, 9.74, 9.49, 9.23, 8.97, 8.71, 8.45, 8.19, 7.93, 7.69,
+    7.45, 7.24, 7.04, 6.85, 6.75, 6.66, 6.58, 3.43, 3.3, 3.18, 3.05,
+    2.78, 2.54, 2.3, 2.06, 1.81, 1.55, 1.29, 1.03, 0.77, 0.52, 0.26,
+    0.02, -0.23, -0.48, -0.73, -0.98, -1.24, -1.5, -1.76, -2.03, -2.3, -2.57,
+    -2.85, -3.12, -3.4, -3.69, -3.97, -4.25, -4.53, -4.82, -5.1, -5.39, -5.68,
+    -5.96, -6.23, -6.5, -6.76, -7.02, -7.28, -7.53, -7.79, -8.05, -8.31, -8.57,
+    -8.83, -9.09, -9.34, -9.6, -9.85, -10.11, -10.37, -10.63, -10.9, -11.17, -11.44,
+    -11.72, -11.99, -12.26, -12.53, -12.8, -13.07, -13.33, -13.58, -13.84, -14.09, -14.34,
+    -14.6, -14.85, -15.11, -15.37, -15.64, -15.9,
+]
+SUN_Z = [
+    0.21, 0.21, 0.21, 0.2, 0.2, 0.21, 0.22, 0.24, 0.25, 0.26, 0.25, 0.24, 0.21, 0.16,
+    0.12, 0.08, 0.04, 0.02, 0.01, 0.01, 0.03, 0.06, 0.08, 0.1, 0.11, 0.1, 0.08, 0.04,
+    -0, -0.04, -0.05, -0.04, -0.01, 0.07, 0.36, 0.67, 0.98, 1.14, 1.35, 1.63, 1.14, 1.12,
+    1.13, 1.15, 1.06, 1.16, 1.23, 1.28, 1.3, 1.3, 1.28, 1.27, 1.25, 1.25, 1.27, 1.31,
+    1.35, 1.39, 1.42, 1.43, 1.43, 1.42, 1.39, 1.36, 1.3, 1.24, 1.15, 1.06, 0.96, 0.85,
+    0.75, 0.65, 0.54, 0.43, 0.32, 0.2, 0.09, 0, -0.06, -0.1, -0.12, -0.11, -0.09, -0.06,
+    -0.05, -0.04, -0.04, -0.03, -0.02, -0.01, 0.01, 0.04, 0.06, 0.09, 0.1, 0.09, 0.07, 0.03,
+    -0, -0.04, -0.08, -0.12, -0.15, -0.17, -0.18, -0.17, -0.15, -0.12, -0.08, -0.03, 0.02, 0.05,
+    0.07, 0.07, 0.07, 0.06,
+]
+# fmt: on
+
+
+@pytest.mark.slow
+def test_slope_weight_keeps_the_cap_off_a_rise_into_a_sunlit_gap():
+    """`WeldConfig.cap_slope_weight` (issue 12): the cap follows the steep rise into the
+    sunlit flank's gap and is placed 1.1 mm off; with points steeper than the cap's toe
+    weighted 0.2 it is within 0.2 mm. On a whole synthetic bead it changes nothing."""
+    y = np.asarray(SUN_Y)
+    pts = np.stack([np.full(y.size, 150.0), y, np.asarray(SUN_Z)], -1).astype(np.float32)
+    w = np.ones(y.size, np.float32)
+    w[38:40] = 0.1
+    P, V, W = jnp.asarray(pts), jnp.ones(y.size, bool), jnp.asarray(w)
+    plain = feature(P, V, 1, WeldConfig(), W)
+    slope = feature(P, V, 1, WeldConfig(cap_slope_weight=0.2), W)
+    assert bool(plain.found) and bool(slope.found)
+    assert float(plain.position) > 0.8, float(plain.position)
+    assert abs(float(slope.position)) < 0.2, float(slope.position)
+    rng = np.random.default_rng(3)
+    pts, valid, apex = horizontal_profile(rng, 5.0, 16.0, 2.0)
+    P, V = jnp.asarray(pts), jnp.asarray(valid)
+    a = feature(P, V, 1, WeldConfig())
+    b = feature(P, V, 1, WeldConfig(cap_slope_weight=0.2))
+    assert float(b.position) == pytest.approx(float(a.position), abs=0.02)
