@@ -113,11 +113,14 @@ class PipelineConfig(eqx.Module):
         → 11.99 ms, p10 5.55 → 4.72, process CPU 8.21 → 7.12 ms, paired −0.768 ms, faster
         in 62 % of the frames; again at load 4.9–3.2: median 4.83 → 4.23 ms, p10 4.14 → 3.42,
         process CPU 6.78 → 5.92 ms, paired −0.638 ms (quartiles −0.969 / −0.268), faster in
-        84 % of the frames. Rolled projector (`experiments.band_lean_check`'s rig, fresh dev
-        seed 7550, 8 frames, `tracking_config`): 25° and 8° both ran 7 of 7 tracking frames in
-        sheared bands with either setting, the same share found (h 99.9 %, v 100 %), h band −
-        full identical; v median 0.0306 → 0.0328 px (25°), max 0.000 → 0.165 px (8°). The
-        closed loop on a rolled rig was not rerun.
+        84 % of the frames; at load 0.2–1.4: median 5.53 → 4.68 ms, p10 4.60 → 3.87, process
+        CPU 7.68 → 6.62 ms, paired −0.790 ms (quartiles −1.189 / −0.402), faster in 89 %;
+        ``--program tracker-med`` (load 1.4–1.5): median 5.89 → 5.22 ms, p10 4.76 → 4.11,
+        paired −0.761 ms, faster in 88 %. Rolled projector (`experiments.band_lean_check`'s
+        rig, fresh dev seed 7550, 8 frames, `tracking_config`): 25° and 8° both ran 7 of 7
+        tracking frames in sheared bands with either setting, the same share found (h 99.9 %,
+        v 100 %), h band − full identical; v median 0.0306 → 0.0328 px (25°), max 0.000 →
+        0.165 px (8°). The closed loop on a rolled rig was not rerun.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
     roi_lean: a stripe that does not fit its straight band gets a band that follows its
         fitted line (`cslx.runtime.band_lean`, a rolled projector; issues 12 / 13) when
