@@ -85,6 +85,42 @@ class PipelineConfig(eqx.Module):
     threshold / snr: Steger's relative and noise-floor thresholds.
     roi_half_h / roi_half_w: half-height of the row band around the horizontal stripe and
         half-width of the column band around the vertical stripe, px; 0 disables the ROI.
+        24 / 40 (48 rows = 3 ``L_roi``, 80 columns = 5 ``L_roi``; 32 / 64 before, issue 13,
+        `experiments.band_width`, one process per seed block, the same frames in the same
+        order): on a rigid sensor the stripes move in the image only with depth. Over the
+        development T approaches (seeds 7301, 7302, 7305, both placements, every nuisance:
+        24 runs of 48 frames) the horizontal stripe's 98th-percentile distance from the
+        previous frame's median centre was at most 4.3 px; the vertical stripe's from the
+        previous frame's line (its band follows a leaning stripe, `band_lean`) at most
+        9.1 px but in two flank-sunny runs (29.0, 30.6 px at their worst frame); a band of
+        24 holds the stripe within ±16 px of its centre before ``roi_margin`` ends
+        tracking. Every frame after the first ran in the bands with either setting (roi
+        share 1.000 in every run). The `Tracker` with MED in the bands
+        (``config=PipelineConfig(...)``), 32 / 64 → 24 / 40, means over the 24 runs:
+        offset error mean 0.1510 → 0.1476 mm, max 0.700 → 0.697 mm, heading 0.265 →
+        0.253°, T recall 98.4 → 99.0 %, false T frames 7 → 7 (all in 7305 flank glare);
+        with its own pipeline (`tracking_config`): 0.1051 → 0.1047 mm, 0.490 → 0.477 mm,
+        0.220 → 0.210°, T 99.1 → 99.1 %, false T 0 → 0 (24 / 48 gave every one of these
+        figures as 24 / 40). Band − full-frame MED centres on carried sunny video (dev seeds
+        0 / 1 / 555, 24 frames, worst |median| over every third frame and both stripes;
+        goal 0.05 px): 0.0204 / 0.0108 / 0.0090 → 0.0217 / 0.0116 / 0.0091 px (20 / 32:
+        0.0300 / 0.0123 / 0.0096); median |centre − truth| 0.0980 / 0.1078 / 0.1043 →
+        0.0962 / 0.1083 / 0.1061 px; tracking share 1.00 on each.
+        Tracking mode (interleaved, one process, 300 frames each, sunny video seed 0, load
+        6–7): median paired ratio against 32 / 64 0.912 (24 / 48), 0.853 (24 / 40), 0.875
+        (20 / 40), 0.872 (20 / 32), p10 5.46 → 4.74 / 4.51 / 4.58 / 4.69 ms.
+        `experiments.ab_tracking --rev 879e4fc` (300 frames, load 8.8–10.6): median 13.54
+        → 11.99 ms, p10 5.55 → 4.72, process CPU 8.21 → 7.12 ms, paired −0.768 ms, faster
+        in 62 % of the frames; again at load 4.9–3.2: median 4.83 → 4.23 ms, p10 4.14 → 3.42,
+        process CPU 6.78 → 5.92 ms, paired −0.638 ms (quartiles −0.969 / −0.268), faster in
+        84 % of the frames; at load 0.2–1.4: median 5.53 → 4.68 ms, p10 4.60 → 3.87, process
+        CPU 7.68 → 6.62 ms, paired −0.790 ms (quartiles −1.189 / −0.402), faster in 89 %;
+        ``--program tracker-med`` (load 1.4–1.5): median 5.89 → 5.22 ms, p10 4.76 → 4.11,
+        paired −0.761 ms, faster in 88 %. Rolled projector (`experiments.band_lean_check`'s
+        rig, fresh dev seed 7550, 8 frames, `tracking_config`): 25° and 8° both ran 7 of 7
+        tracking frames in sheared bands with either setting, the same share found (h 99.9 %,
+        v 100 %), h band − full identical; v median 0.0306 → 0.0328 px (25°), max 0.000 →
+        0.165 px (8°). The closed loop on a rolled rig was not rerun.
     roi_margin: a stripe closer than this to its band's edge ends tracking mode.
     roi_lean: a stripe that does not fit its straight band gets a band that follows its
         fitted line (`cslx.runtime.band_lean`, a rolled projector; issues 12 / 13) when
@@ -237,8 +273,8 @@ class PipelineConfig(eqx.Module):
     sigma: float = eqx.field(static=True, default=2.0)
     threshold: float = eqx.field(static=True, default=0.1)
     snr: float = eqx.field(static=True, default=5.0)
-    roi_half_h: int = eqx.field(static=True, default=32)
-    roi_half_w: int = eqx.field(static=True, default=64)
+    roi_half_h: int = eqx.field(static=True, default=24)
+    roi_half_w: int = eqx.field(static=True, default=40)
     roi_margin: int = eqx.field(static=True, default=8)
     roi_lean: bool = eqx.field(static=True, default=True)
     roi_lean_fraction: float = eqx.field(static=True, default=0.95)
