@@ -35,6 +35,8 @@ import pathlib
 
 import numpy as np
 
+from experiments.band_alternate import carried
+
 
 def parse_variant(text: str) -> tuple[str, dict]:
     name, spec = text.split("=", 1)
@@ -67,17 +69,6 @@ def excursion(results) -> tuple[float, float, float, float]:
         straight.append(worst[0])
         line.append(worst[1])
     return straight[0], straight[1], line[0], line[1]
-
-
-def carried(sensor, config, frames):
-    from cslx.runtime import pipeline
-
-    st = pipeline.init_state(config, sensor.camera.image_size)
-    out = []
-    for f in frames:
-        r, st = pipeline.process_frame(sensor, config, f, st)
-        out.append(r)
-    return out
 
 
 def main(argv=None) -> int:
