@@ -110,8 +110,9 @@ LIT_SHARE = 0.5
 REACH = 2.0
 #: The line is followed while it lies at least `MARGIN` px inside the outer pixel centres
 #: across: −0.5 is the outer pixels' edge, where the image (and the truth of `cslx.sim`)
-#: ends. At 0 the last centre an end, inside the outer pixel, was lost (48 of the 221 lost
-#: on the 80 development frame-stripes of `experiments.roll_losses`, seed 7800, frames 0–3).
+#: ends. At 0 the last centre an end, inside the outer pixel, was lost (−0.5 recovers 42 of
+#: the 221 lost on the 80 development frame-stripes of `experiments.roll_losses`, seed
+#: 7800, frames 0–3; no gross centre added).
 MARGIN = -0.5
 #: The frame's end along may come first where the line is then within `CORNER` × the cut
 #: zone (`FIT_WIDTHS` σ_t + `FIT_PX`) of the border across: the stripe leaves by a corner

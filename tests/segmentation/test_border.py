@@ -125,7 +125,7 @@ def test_a_bend_the_path_smoothed_away_is_seen_on_the_image_along_the_border():
 
 def test_the_last_centre_within_the_outer_pixel_and_a_corner_are_extended():
     """The truth runs to the outer pixels' edges (−0.5, M − 0.5): the line stopped at the
-    outer pixel centres and lost one centre an end (48 of the 221 lost on the development
+    outer pixel centres and lost one centre an end (42 of the 221 lost on the development
     frames of `experiments.roll_losses`, seed 7800). And a stripe that leaves by a corner
     meets the frame's end along while inside the cut zone (roll35/saturated V 7802/0: rows
     0–16, 2–10 px from the border across): the reach test refused it."""
