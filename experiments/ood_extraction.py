@@ -315,6 +315,10 @@ roll45/sunny V 99.12 % with 0 gross (the line's 8 gone), H 99.72 %, roll45/satur
 99.48 %, the rest as the line's above. So `robust.BORDER` is on. Development benchmark
 (`robust_extraction`'s 18 conditions, seeds 7100–7117, frame 0, both stripes): `extend`
 returns its inputs unchanged on all 36 frame-stripes (no end qualifies), so bit-identical.
+
+What the turned cross still lost after that, and the fixes (branch roll11: the extension to
+the outer pixels' edge and through corners, a single direction peak of the other stripe):
+`experiments/roll_losses.py`'s docstring.
 """
 
 from __future__ import annotations

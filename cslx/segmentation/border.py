@@ -14,7 +14,8 @@ on the border along (V, 0–15) and on clipped pixels (V sunny / saturated, 5–
 
 `extend` sets, at each end of the path, the centres closer than `FIT_WIDTHS` σ_t + `FIT_PX`
 to the border across (σ_t from the final pass's σ and measured width) by a line (`FIT_DEG`,
-below) through the next `FIT_LEN` centres inside, out to the border (`MARGIN`), where:
+below) through the next `FIT_LEN` centres inside, out to the border (`MARGIN`: the outer
+pixels' edge, half a pixel past their centres), where:
 - the fit's slope is at least `MIN_SLOPE` (the stripe meets the border obliquely; an aligned
   stripe's ends are left alone, so the default rig's frames do not change);
 - the fit meets the border within `REACH` × that distance of its support (a path ending far
@@ -22,7 +23,8 @@ below) through the next `FIT_LEN` centres inside, out to the border (`MARGIN`), 
   frame's end along: a path that ends at the border along has whole profiles there (before
   this check, roll35/saturated H 7809/3 was followed 60–70 px from the border across over
   the 11 columns next to the left border, 8 gross centres: the support's slope 0.74, the
-  truth's ≈ 0.6);
+  truth's ≈ 0.6) — unless the line is then still within the cut zone of the border across
+  (`CORNER`: the stripe leaves by a corner, its last profiles cut as well);
 - the path's own centres nearer the border lie within `ZONE_TOL` px of the fit (median): a
   surface corner between the support and the border (roll35/saturated V, seed 7577, frames
   1, 3 and 7: slope 0.75 inside, 0.52 beyond row 61) put the extrapolation 1–3.4 px off, 15–17
@@ -106,8 +108,18 @@ MIN_SLOPE = 0.22
 LIT_SHARE = 0.5
 #: The line must meet the border within `REACH` × that distance (px across) of the support.
 REACH = 2.0
-#: The line is followed while it lies at least `MARGIN` px inside the image across.
-MARGIN = 0.0
+#: The line is followed while it lies at least `MARGIN` px inside the outer pixel centres
+#: across: −0.5 is the outer pixels' edge, where the image (and the truth of `cslx.sim`)
+#: ends. At 0 the last centre an end, inside the outer pixel, was lost (−0.5 recovers 42 of
+#: the 221 lost on the 80 development frame-stripes of `experiments.roll_losses`, seed
+#: 7800, frames 0–3; no gross centre added).
+MARGIN = -0.5
+#: The frame's end along may come first where the line is then within `CORNER` × the cut
+#: zone (`FIT_WIDTHS` σ_t + `FIT_PX`) of the border across: the stripe leaves by a corner
+#: (same frames: 39 lost in 5 ends, e.g. roll35/saturated V 7802/0 rows 0–16, 2–10 px from
+#: the border across). 0: the line must leave the frame across first. The path that ended
+#: at the border along 60–70 px inside (7809/3 H, the check's reason) stays refused.
+CORNER = 1.0
 #: The extension ends where the stripe measured on the profiles along the border
 #: (`_measured`) lies, on average over `MEASURE_WINDOW` centres, more than `MEASURE_TOL` px
 #: across from the line (a bend the path's smoothed centres hide).
@@ -177,7 +189,9 @@ def _end(pos, valid, img, clipped, img_shape, width, reverse: bool):
     # where the reach runs past the frame along, the line must have left it across by the
     # frame's end: else the path ends at the border along (intact profiles, not cut ones)
     j_out = int(np.clip(support[0] - step * reach, 0, n - 1))
-    if 0 <= np.polyval(coef, j_out - support[0]) <= m - 1:
+    q_out = np.polyval(coef, j_out - support[0])
+    inner = CORNER * d  # a corner: the line still within the cut zone at the frame's end
+    if inner <= q_out <= m - 1 - inner:
         return None  # the line does not meet the border across within the reach
     img, clipped = img(), clipped()  # only now on the host (a turned stripe at the border)
     plateau = np.median(_sample(img, support, pos[support]))

@@ -134,3 +134,23 @@ def test_the_calibration_says_which_stripe_is_which():
     hist = np.asarray(orient.direction_histogram(img))
     assert abs(orient.peak_angles(hist, 1)[0] - 45.3) < 1.5
     assert abs(orient.peak_angles(hist, 1, expected=-40.7)[0] + 44.7) < 1.5
+
+
+def test_a_single_stripe_seen_near_45_degrees_is_not_taken_by_both_searches():
+    # roll45/shadow, development seed 7809 frame 0: the vertical stripe, washed out in the
+    # sunlit half, left the direction histogram one peak, the horizontal stripe's (46.5°
+    # from x, 43.5° from y), and the v search took it (324 gross centres). Under the tie's
+    # rule it is "h" (positive angle): the v search then runs perpendicular to it.
+    rng = np.random.default_rng(36)
+    vv, uu = np.mgrid[0:H, 0:W].astype(float)
+    n = (-math.sin(math.radians(46.5)), math.cos(math.radians(46.5)))
+    d = (uu - 100.3) * n[0] + (vv - 60.4) * n[1]
+    img = 20.0 + 120.0 * np.exp(-0.5 * (d / 1.3) ** 2) + rng.normal(0, 1.0, (H, W))
+    h, h_other = orient.peak_angles(np.asarray(orient.direction_histogram(img)), 1)
+    assert abs(h - 46.5) < 1.5 and h_other is None
+    hist_v = np.asarray(orient.direction_histogram(img.T))
+    v, v_other = orient.peak_angles(hist_v, -1)
+    assert abs(v_other - 43.5) < 1.5 and abs(v + 46.5) < 1.5
+    # with the calibration: its angle, the peak as the other stripe
+    v, v_other = orient.peak_angles(hist_v, -1, expected=-40.0)
+    assert v == -40.0 and abs(v_other - 43.5) < 1.5
