@@ -296,8 +296,10 @@ class KalmanConfig:
     # heading within 0.02° a kind (experiments/tracking_diagnostics.py).
     heading_sd_model: bool = False
     heading_max_sd_deg: float = 0.0
-    # the start (`cslx.runtime.filter_start`, its evidence there): ≥ 3: restart on the 2nd to
-    # K-th beads after a cold start when they agree and the first does not; < 3: off
+    # the start (`cslx.runtime.filter_start`; off: on 104 dev runs 3 changed 7743 flank sunny's
+    # offset mean 0.187 → 0.196 mm only, the width range traded offset max misses 3 → 1 for
+    # estimate misses 0 → 4). ≥ 3: restart on the 2nd to K-th beads from a cold start when
+    # they agree and the first does not; < 3: off
     start_agree: int = 0
     # (lo, hi) mm: a cold filter waits for a bead of this width or two agreeing ones; None: off
     start_width_mm: tuple[float, float] | None = None
