@@ -11,6 +11,9 @@ variant the number of runs missing each goal.
     python -m experiments.start_rule --seed 7301 --also-seed 7740 --seeds 4 \\
         --cache /tmp/cslx-tracking-sequences/sequences [--frames 48]
 
+``--bead-wide``: instead, `experiments.tracking_generality`'s bead_wide condition (22–26 mm
+beads, 32 frames, clean and sunny) at ``--seed`` (its development seed 7400), each variant.
+
 A run a variant's consensus has not decided by its last frame is named ("start
 undecided"): with ``--frames 3`` that says whether frames 0–2 were enough to tell.
 
@@ -49,12 +52,33 @@ def misses(s: dict) -> set[str]:
     return out
 
 
+def bead_wide(seed: int, trackers_for) -> None:
+    """The variants on `experiments.tracking_generality`'s bead_wide condition (module
+    docstring); ``trackers_for(sensor)`` → name → tracker."""
+    from experiments.tracking_generality import CONDITIONS, sequence
+    from experiments.tracking_generality import score as score_rig
+    from experiments.tracking_sequences import run_tracker
+
+    trackers = None
+    for nu in ("clean", "sunny"):
+        seq = sequence(seed, CONDITIONS["bead_wide"], 32, nu)
+        sensor = seq.pop("sensor")
+        trackers = trackers or trackers_for(sensor)
+        for name, tracker in trackers.items():
+            obs = run_tracker(tracker, seq)
+            s = score_rig(obs, seq, sensor)
+            text = " ".join(f"{k} {s[k]:.4g}" for k in KEYS)
+            widths = " ".join(f"{o.bead_width_mm:.1f}" for o in obs[:3])
+            print(f"bead_wide {seed} {nu} [{name}] {text}; first widths {widths}", flush=True)
+
+
 def main() -> None:
     p = parser(__doc__.splitlines()[0], 48, 7301)
     p.add_argument("--seeds", type=int, default=1)
     p.add_argument("--also-seed", type=int, action="append", default=[])
     p.add_argument("--cache", action="append", default=[])
     p.add_argument("--variant", action="append", choices=sorted(VARIANTS))
+    p.add_argument("--bead-wide", action="store_true", help="the bead_wide condition instead")
     a = p.parse_args()
     from cslx.environment import configure
 
@@ -66,14 +90,24 @@ def main() -> None:
     from experiments.tracking_sequences import run_tracker
 
     names = ("default", *(a.variant or VARIANTS))
+
+    def trackers_for(sensor) -> dict:
+        return {
+            n: Tracker.from_calibration(
+                sensor,
+                log=lambda s: None,
+                kalman=dataclasses.replace(KalmanConfig(), **VARIANTS.get(n, {})),
+            )
+            for n in names
+        }
+
+    if a.bead_wide:
+        bead_wide(a.seed, trackers_for)
+        return
     memo: dict = {}
-    trackers = {}
-    for name in names:
-        kalman = dataclasses.replace(KalmanConfig(), **VARIANTS.get(name, {}))
-        trackers[name] = Tracker.from_calibration(
-            default_sensor(), log=lambda s: None, kalman=kalman
-        )
-        _share_pipeline(trackers[name], memo)
+    trackers = trackers_for(default_sensor())
+    for tracker in trackers.values():
+        _share_pipeline(tracker, memo)
     caches = [pathlib.Path(c) for c in a.cache or ["/tmp/cslx-tracking-sequences/sequences"]]
     seeds = [s for b in (a.seed, *a.also_seed) for s in range(b, b + a.seeds)]
     n_miss = {n: {k: 0 for k, *_ in GOALS} for n in names}

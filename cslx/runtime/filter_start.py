@@ -38,9 +38,11 @@ on the same pipeline outputs, development runs (seeds 7301, 7302, 7305, 1201–1
 7740–7743, both placements, every nuisance; 48 frames):
 
 - `start_agree` 3 (and 4): one run of the 104 changes, 7743 flank sunny, offset mean
-  0.1874 → 0.1960 mm (4: 0.1984), its max (2.98 mm, frame 0) unchanged: the restart
-  re-opens the start covariance on frame 2, so the next beads weigh more. No verdict
-  changes; every other run identical. Mean over the runs unchanged to 0.0001 mm.
+  0.1874 → 0.1960 mm (4: 0.1984), its max (2.98 mm, frame 0) unchanged: frame 2
+  −0.16 → −0.02 mm, but 10 of frames 3–13 farther off, by up to 0.10 mm (the restart
+  re-opens the start covariance of offset and heading on frame 2; frame 3 +0.20 → +0.28,
+  frame 7 −0.05 → −0.15; frame 5 +0.14 → +0.11). No verdict changes; every other run
+  identical; the mean over the runs unchanged to 0.0001 mm.
 - `start_width_mm` (9.6, 24), the rendered beads' 12–20 mm ± `width_tol`: 4 runs change,
   each by the first frame's estimate: 7743 flank sunny offset max 2.976 → 0.290 mm (mean
   0.187 → 0.131), 7743 flank glare 1.161 → 0.250 (mean 0.097 → 0.079), 7743 flank shadow
