@@ -528,7 +528,7 @@ class Tracker:
             if not kf.innovation_ok(raw["h_x_mm"], raw["h_y_mm"], raw["h_confidence"] * w):
                 refit_near(raw, np.asarray(points_h), self, self.config.weld)
             conf = raw["h_confidence"] * self._width_factor(raw["h_width_mm"])
-            accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf)
+            accepted = kf.update(raw["h_x_mm"], raw["h_y_mm"], conf, raw["h_width_mm"])
             if accepted and math.isfinite(raw["h_width_mm"]):
                 self._widths.append(raw["h_width_mm"])
             wh = self._path.update(
