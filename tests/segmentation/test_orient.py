@@ -89,12 +89,21 @@ def test_a_cross_turned_45_degrees_is_extracted_along_each_stripe():
 
 def test_trim_ends_cuts_a_tail_below_half_the_plateau_strength():
     z = np.full(200, 100.0)
-    z[:10] = np.linspace(5.0, 45.0, 10)  # the erf ramp past a fan's end (smoothed along)
-    z[10:14] = [60.0, 80.0, 95.0, 100.0]
+    z[5:15] = np.linspace(5.0, 45.0, 10)  # the erf ramp past a fan's end (smoothed along)
+    z[15:19] = [60.0, 80.0, 95.0, 100.0]
     valid = np.ones(200, bool)
-    valid[190:] = False
+    valid[:5] = valid[190:] = False  # the path ends inside the frame at both ends
     kept = orient.trim_ends(valid, z)
-    assert not kept[:10].any() and kept[10:190].all() and not kept[190:].any()
+    assert not kept[:15].any() and kept[15:190].all() and not kept[190:].any()
+
+
+def test_trim_ends_keeps_a_path_that_reaches_the_frame_end_along():
+    # a slanted stripe's first-pass strength falls to ≈ 0.43 of its plateau at the frame's
+    # end along (orient.TRIM_AT_BORDER): no fan's end there, the rows are the stripe's
+    z = np.full(200, 100.0)
+    z[:6] = np.linspace(43.0, 48.0, 6)
+    valid = np.ones(200, bool)
+    assert orient.trim_ends(valid, z).all()
 
 
 def test_a_cross_turned_about_45_degrees_keeps_h_and_v_under_a_small_turn():
