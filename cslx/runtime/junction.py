@@ -73,12 +73,23 @@ the flank reaches the bar, has no plate before it either). And a fitted cap tall
 `cslx.sim.render.make_world` requires height ≤ width / 2): 1205 flank sunny frames 7–8 fitted
 8.2 and 10.7 mm high caps 8.5 and 5.9 mm wide to stray sunlit points past a cut run-off.
 Evidence, `experiments.junction_runoff` (the detector replayed on each frame's recorded
-vertical-stripe points, which reproduced the tracker's T scores on every run; dev seeds 7301,
-7302, 7305, 1201–1206, 7740–7743, both placements, every nuisance, 104 runs): see the
-numbers there. Not taken: ranking every bounded candidate above every step (a 0.6–0.9 mm bump on
-the flank or on the plate beyond outranked the bar on the flank: 40 of 52 flank runs missed
-recall); dropping steps altogether (49 of 52 missed); the bump at least half the step's
-height (glare's stray points lift the step's apex: 1205 flank glare recall 87.9 %).
+vertical-stripe points; the replay without both tests reproduced the tracker's T scores on
+every run), dev seeds 7301, 7302, 7305, 1201–1206, 7740–7743, T recall % / false T frames:
+flank (52 runs) runs missing a T goal 5 → 4, false T frames 30 → 20; changed 1205 glare
+81.8 / 14 → 90.9 / 11, 1205 sunny 93.9 / 7 → 100 / 0 (the cap test alone: 93.9 / 0), 1201
+sunny 96.9 / 0 → 100 / 0. Beside (40 runs; 1204–1206 not run) 3 → 5 runs missing, false
+frames 4 → 6: 1203 shadow 100 / 0 → 96.9 / 1, 7743 shadow 100 / 0 → 96.7 / 1, 7741 glare
+96.7 / 1 → 93.3 / 1 (the shadow frames looked at lost their bar sighting: the bar, not
+plate-bounded there, lost to a farther candidate that then found nothing). The same
+with `crossing_bump_mm` 0.8 or 1.2 and `crossing_cap_max` 0.8. Still missing, other
+mechanisms: 1205 flank glare's 11 false frames (sightings on the stem before the bar is in
+view, where no bar is there to win), 7743 flank glare (the bar's sightings 3 mm far while it
+enters the view), 7740 flank sunny (no sightings on its last frames). Not taken: ranking
+every bounded candidate above every step (a 0.6–0.9 mm bump on the flank or on the plate
+beyond outranked the bar on the flank: 40 of 52 flank runs missed recall); dropping steps
+altogether (49 of 52 missed); the bump at least half the step's height (glare's stray
+points lift the step's apex: 1205 flank glare recall 87.9 %); a missing near side counted
+as plate (the three beside runs above unchanged).
 
 The apex tests run on the first `MAX_TOES` toes rather than on every point (a 16 × 480
 instead of a 480 × 480 comparison, twice): `crossing_feature` 1.23 → 0.76 ms in an
