@@ -169,10 +169,14 @@ def replay(run: dict, sights: list) -> tuple[float, int]:
     from cslx.runtime.line_filter import KalmanConfig
     from cslx.runtime.tracker import Tracker
 
-    kalman = KalmanConfig()
-    host = types.SimpleNamespace(
-        kalman=kalman, _junctions=JunctionTrack.from_config(kalman, run["x_ref"])
-    )
+    class Host(Tracker):
+        """Only the tracker's junction state: `Tracker._junction` as the tracker runs it."""
+
+        def __init__(self, kalman, x_ref):  # no pipeline, no compile
+            self.kalman = kalman
+            self._junctions = JunctionTrack.from_config(kalman, x_ref)
+
+    host = Host(KalmanConfig(), run["x_ref"])
     rep = []
     for i, fr in enumerate(run["frames"]):
         if i:
@@ -183,7 +187,7 @@ def replay(run: dict, sights: list) -> tuple[float, int]:
         j, x, h, w = sights[i]
         raw = dict(fr["raw"], junction=j, v_x_mm=x, v_height_mm=h, v_width_mm=w)
         obs = types.SimpleNamespace(frame=fr["frame"], junction=False, junction_x_mm=math.nan)
-        Tracker._junction(host, obs, raw, fr["points"])
+        host._junction(obs, raw, fr["points"])
         rep.append(obs.junction_x_mm if obs.junction else math.nan)
     return t_scores(np.array(rep), run["truth"], run["bar_width"])
 
