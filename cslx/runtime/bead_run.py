@@ -16,7 +16,9 @@ import jax.numpy as jnp
 if TYPE_CHECKING:  # annotations only (strings at run time): no jaxtyping import
     from jaxtyping import Array, Bool, Float
 
-__all__ = ["largest_run", "plate_points", "steep_points"]
+    from .weld import WeldConfig
+
+__all__ = ["largest_run", "plate_points", "side_cover", "steep_points"]
 
 
 def plate_points(
@@ -104,3 +106,23 @@ def steep_points(t, h, valid, factor, weight):
         return jnp.where(g > factor * toe + 0.1, weight, 1.0)
 
     return extra
+
+
+def side_cover(t, valid, weights, t_c, p_cap, half0, config: WeldConfig):
+    """(min(L, R) / max(L, R))^p, p = `WeldConfig.side_cover_power` (1 where p = 0 or no
+    weights): L, R the share of the valid points with a prior weight > 0 on each side of the
+    bead's centre t_c, out to its half-chord plus `cap_margin_mm` (moved here from
+    `cslx.runtime.weld`). A bead one of whose flanks and toes the pipeline weighted out
+    (weight 0: a shadow edge along the stripe; a clipped core's 0.1 counts as kept) is
+    placed by the other flank alone, and its confidence says so."""
+    if weights is None or config.side_cover_power == 0:
+        return 1.0
+    w = (jnp.asarray(weights, t.dtype) > 0).astype(t.dtype)
+    half = jnp.where(jnp.isfinite(p_cap[1]), jnp.abs(p_cap[1]), half0) + config.cap_margin_mm
+    d = t - t_c
+    sides = []
+    for side in (d < 0, d >= 0):
+        m = (valid & side & (jnp.abs(d) < half)).astype(t.dtype)
+        sides.append(jnp.sum(m * w) / jnp.maximum(jnp.sum(m), 1.0))
+    lo, hi = jnp.minimum(*sides), jnp.maximum(*sides)
+    return jnp.where(hi > 0, lo / jnp.maximum(hi, 1e-6), 0.0) ** config.side_cover_power

@@ -53,6 +53,47 @@ sunny); 0.3 (seeds 7400–7410) also cleared 7410 sunny but lost bar sightings a
 (flank, glare and sunny) are another mechanism and stay (glare frame 12: corrupt points dip
 to z_r ≈ −3 mm past the bump, so that it stands high above the far side).
 
+The run-off test (issue 12, `WeldConfig.crossing_bump_mm`, `crossing_cap_max`): where the
+vertical stripe runs along the followed bead's flank, the heading's wobble takes it off the
+flank onto the plate 20–50 mm before the bar. That run-off is a step from bead height to the
+plate, not a bump: there is no plate on its near side. Sun cuts its points and glare adds
+ripples and dips below the plate past it, so that, measured against the lowest point beyond,
+it passed the rise and ramp tests and stood higher than the bar (dev seed 1205, cross on the
+flank, glare frames 16–17: the run-off at x_r 159–160 mm, 2.6–2.7 mm high, won over the bar
+at 208 mm, 2.5–2.8 mm). Each candidate is therefore also asked whether it is bounded by plate
+on its near side: a point within its apex-to-toe distance + `cap_margin_mm` before its apex
+at most `threshold_mm` above the mean plate-line height over `cap_margin_mm` past its far toe.
+A candidate that is not (a step) is dropped where a bounded candidate at least
+`crossing_bump_mm` high (the tracker's own minimum sighting height,
+`KalmanConfig.junction_min_height_mm`, 1 mm) ends farther along the stripe: the crossing weld
+ends the followed weld, so a step nearer than a bead with plate on both sides is the stem's
+run-off. A step with no such bump beyond it still competes (a bar on the stem's flank, where
+the flank reaches the bar, has no plate before it either). And a fitted cap taller than
+`crossing_cap_max` × its half width is no bead (a circular cap is at most a half disc;
+`cslx.sim.render.make_world` requires height ≤ width / 2): 1205 flank sunny frames 7–8 fitted
+8.2 and 10.7 mm high caps 8.5 and 5.9 mm wide to stray sunlit points past a cut run-off.
+Evidence, `experiments.junction_runoff` (the detector replayed on each frame's recorded
+vertical-stripe points; the replay without both tests reproduced the tracker's T scores on
+every run), dev seeds 7301, 7302, 7305, 1201–1206, 7740–7743, T recall % / false T frames:
+flank (52 runs) runs missing a T goal 5 → 4, false T frames 30 → 20; changed 1205 glare
+81.8 / 14 → 90.9 / 11, 1205 sunny 93.9 / 7 → 100 / 0 (the cap test alone: 93.9 / 0), 1201
+sunny 96.9 / 0 → 100 / 0. Beside (40 runs; 1204–1206 not run) 3 → 5 runs missing, false
+frames 4 → 6: 1203 shadow 100 / 0 → 96.9 / 1, 7743 shadow 100 / 0 → 96.7 / 1, 7741 glare
+96.7 / 1 → 93.3 / 1 (the shadow frames looked at lost their bar sighting: the bar, not
+plate-bounded there, lost to a farther candidate that then found nothing). The same
+with `crossing_bump_mm` 0.8 or 1.2 and `crossing_cap_max` 0.8. One check on fresh seeds
+7960–7963 (never used before; 32 runs, both placements, every nuisance): runs missing a T
+goal 3 → 2, false T frames 9 → 3, mean recall 98.94 → 99.67 %; 7963 flank glare 76.7 / 0 →
+100 / 0, 7960 flank glare 92.9 / 8 → 92.9 / 2, no other run changed. Still missing, other
+mechanisms: 1205 flank glare's 11 false frames (sightings on the stem before the bar is in
+view, where no bar is there to win), 7743 flank glare (the bar's sightings 3 mm far while it
+enters the view), 7740 flank sunny (no sightings on its last frames). Not taken: ranking
+every bounded candidate above every step (a 0.6–0.9 mm bump on the flank or on the plate
+beyond outranked the bar on the flank: 40 of 52 flank runs missed recall); dropping steps
+altogether (49 of 52 missed); the bump at least half the step's height (glare's stray
+points lift the step's apex: 1205 flank glare recall 87.9 %); a missing near side counted
+as plate (the three beside runs above unchanged).
+
 The apex tests run on the first `MAX_TOES` toes rather than on every point (a 16 × 480
 instead of a 480 × 480 comparison, twice): `crossing_feature` 1.23 → 0.76 ms in an
 interleaved A/B run at load ≈ 20 (issue 13), with identical features on 84 rendered
@@ -147,11 +188,23 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig, hp=None):
             back = t_apex - config.crossing_background_mm
             z_back, at_back = _window_mean(t, hp, ok, back, RAMP_HALF_MM)
             ramp = jnp.where(at_apex & at_back, z_back - z_apex, -jnp.inf)
-        return apex, jnp.min(jnp.where(near, h, jnp.inf)), jnp.any(near), ramp
+        # the run-off test: plate on the near side too, i.e. a point within the apex-to-toe
+        # distance + `cap_margin_mm` before the apex at most `threshold_mm` above the mean
+        # plate-line height over `cap_margin_mm` past the far toe
+        if hp is None:
+            bounded = jnp.asarray(True)
+        else:
+            t_toe = 0.5 * (t[i] + t[nxt_c[i]])
+            m = config.cap_margin_mm
+            far, at_far = _window_mean(t, hp, ok, t_toe + 0.5 * m, 0.5 * m)
+            reach = ok & (t < t_apex) & (t >= 2.0 * t_apex - t_toe - m)
+            low_near = jnp.min(jnp.where(reach, hp, jnp.inf))
+            bounded = at_far & (low_near <= far + config.threshold_mm)
+        return apex, jnp.min(jnp.where(near, h, jnp.inf)), jnp.any(near), ramp, bounded
 
     # one toe at a time: a (toe, point) array's float minima and maxima went to XLA's
     # library reductions, which keep the caller's loop from compiling as one function
-    apex, h_before, has_near, ramp = jax.lax.map(one_toe, r)
+    apex, h_before, has_near, ramp, bounded = jax.lax.map(one_toe, r)
     h_apex = h[apex]
     t_apex = t[apex]
     t_toe = 0.5 * (t[r] + t[nxt_c[r]])  # between the last bead point and the first plate point
@@ -166,6 +219,11 @@ def _best_apex(rows, toe, t, h, ok, nxt_c, config: WeldConfig, hp=None):
         & (rise >= 0.15 * h_apex)
         & (ramp <= config.crossing_ramp_max * h_apex)
     )
+    # a step (no plate before it) nearer than a good bump at least crossing_bump_mm high
+    # is the followed bead's run-off, not the bar (module docstring, "run-off test")
+    bump = good & bounded & (h_apex >= config.crossing_bump_mm)
+    far_bump = jnp.max(jnp.where(bump, t_toe, -jnp.inf))
+    good = good & (bounded | (t_toe >= far_bump))
     k = jnp.argmax(jnp.where(good, h_apex, -jnp.inf))
     return apex[k], t_apex[k], t_toe[k], h_apex[k], jnp.any(good)
 
@@ -363,6 +421,7 @@ def _crossing(P, valid, order, *, config: WeldConfig) -> WeldFeature:
         & (height >= config.min_height_mm)
         & (width >= config.min_width_mm)
         & (width <= config.max_width_mm)
+        & (height <= config.crossing_cap_max * 0.5 * width)
     )
     # back to (x, z): the apex of the cap
     x_c = (a - c1 * height) / norm

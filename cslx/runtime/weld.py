@@ -57,7 +57,7 @@ import jax.numpy as jnp
 
 from ..pytree import pytree_dataclass, static
 from .bead_run import largest_run as _largest_run
-from .bead_run import plate_points, steep_points
+from .bead_run import plate_points, side_cover, steep_points
 from .small_ops import masked_median, one_function, solve_spd
 from .vertical_heading import heading_from_vertical
 
@@ -104,9 +104,13 @@ class WeldConfig:
         `crossing_background_mm` before it exceeds the apex's by more than this share of
         its height (the stripe running off the followed bead's flank, not a bar;
         `cslx.runtime.junction`, "ramp test"); inf: off.
+    crossing_cap_max / crossing_bump_mm: a crossing bead's fitted cap is at most this ×
+        its half width high (a circular cap is no taller than a half disc), and a candidate
+        without plate on its near side loses to a farther one with plate on both sides and
+        an apex this high (`cslx.runtime.junction`, "run-off test", issue 12); inf: off.
     side_cover_power: p > 0: the confidence × (min(L, R) / max(L, R))^p, L and R the share
         of the valid points with a prior weight > 0 on each side of the bead's centre, out
-        to its half-chord + `cap_margin_mm` (`_side_cover`): a bead one of whose flanks the
+        to its half-chord + `cap_margin_mm` (`bead_run.side_cover`): a bead one of whose flanks the
         pipeline weighted out is placed by the other alone. 0 (off) here; 2 in the tracker's
         pipeline (`cslx.runtime.pipeline_config.tracking_config`, the evidence there).
     min_plate_mm: > 0: a bead run ends only at a stretch of plate points this long, and a
@@ -134,6 +138,8 @@ class WeldConfig:
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
     crossing_ramp_max: float = 0.4
+    crossing_cap_max: float = 1.0
+    crossing_bump_mm: float = 1.0
     n_cap: int = static(8)
     side_cover_power: float = static(0.0)
     min_plate_mm: float = static(0.0)
@@ -349,25 +355,6 @@ def _cap_fit(t, h, w, p0, sigma, n_iter, extra=None):
     return p, wr
 
 
-def _side_cover(t, valid, weights, t_c, p_cap, half0, config: WeldConfig):
-    """(min(L, R) / max(L, R))^p, p = `side_cover_power` (1 where p = 0 or no weights): L, R
-    the share of the valid points with a prior weight > 0 on each side of the bead's centre
-    t_c, out to its half-chord plus `cap_margin_mm`. A bead one of whose flanks and toes the
-    pipeline weighted out (weight 0: a shadow edge along the stripe; a clipped core's 0.1
-    counts as kept) is placed by the other flank alone, and its confidence says so."""
-    if weights is None or config.side_cover_power == 0:
-        return 1.0
-    w = (jnp.asarray(weights, t.dtype) > 0).astype(t.dtype)
-    half = jnp.where(jnp.isfinite(p_cap[1]), jnp.abs(p_cap[1]), half0) + config.cap_margin_mm
-    d = t - t_c
-    sides = []
-    for side in (d < 0, d >= 0):
-        m = (valid & side & (jnp.abs(d) < half)).astype(t.dtype)
-        sides.append(jnp.sum(m * w) / jnp.maximum(jnp.sum(m), 1.0))
-    lo, hi = jnp.minimum(*sides), jnp.maximum(*sides)
-    return jnp.where(hi > 0, lo / jnp.maximum(hi, 1e-6), 0.0) ** config.side_cover_power
-
-
 def stripe_feature(
     points: Float[Array, "n 3"],
     valid: Bool[Array, " n"],
@@ -526,7 +513,7 @@ def _bead(P, s, s_mean, q, *, valid, axis, config: WeldConfig, weights) -> WeldF
     f_contrast = 1.0 - jnp.exp(-jnp.maximum(height, 0.0) / (10.0 * sigma))
     f_cover = jnp.clip(n_in / jnp.maximum(span, 1.0), 0.0, 1.0) * jnp.clip(n_in / 15.0, 0, 1)
     f_valid = jnp.clip(n_valid / (0.5 * n), 0.0, 1.0)
-    f_side = _side_cover(t, valid, weights, t_cap, p_cap, half0, config)
+    f_side = side_cover(t, valid, weights, t_cap, p_cap, half0, config)
     confidence = jnp.where(found, f_fit * f_contrast * f_cover * f_valid * f_side, 0.0)
     return _feature(found, centre, pos, width, height, confidence, sigma, dtype)
 
