@@ -50,6 +50,7 @@ only |θ| is seen) or uninformative (bare plate).
 from __future__ import annotations
 
 import functools
+import math
 from typing import TYPE_CHECKING, NamedTuple
 
 import jax
@@ -107,7 +108,8 @@ class WeldConfig:
     crossing_cap_max / crossing_bump_mm: a crossing bead's fitted cap is at most this ×
         its half width high (a circular cap is no taller than a half disc), and a candidate
         without plate on its near side loses to a farther one with plate on both sides and
-        an apex this high (`cslx.runtime.junction`, "run-off test", issue 12); inf: off.
+        an apex this high (`cslx.runtime.junction`, "run-off test", issue 12); inf: off
+        (the default: with 1.0 / 1.0 a clean still frame's T was lost, the module's notes).
     side_cover_power: p > 0: the confidence × (min(L, R) / max(L, R))^p, L and R the share
         of the valid points with a prior weight > 0 on each side of the bead's centre, out
         to its half-chord + `cap_margin_mm` (`bead_run.side_cover`): a bead one of whose flanks the
@@ -138,8 +140,8 @@ class WeldConfig:
     cap_margin_mm: float = 4.0
     crossing_background_mm: float = 12.0
     crossing_ramp_max: float = 0.4
-    crossing_cap_max: float = 1.0
-    crossing_bump_mm: float = 1.0
+    crossing_cap_max: float = static(math.inf)
+    crossing_bump_mm: float = static(math.inf)
     n_cap: int = static(8)
     side_cover_power: float = static(0.0)
     min_plate_mm: float = static(0.0)

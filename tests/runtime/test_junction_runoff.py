@@ -12,6 +12,7 @@ from cslx.runtime.weld import WeldConfig
 
 crossing = jax.jit(crossing_feature)
 OFF = dict(crossing_bump_mm=float("inf"), crossing_cap_max=float("inf"))
+ON = WeldConfig(crossing_bump_mm=1.0, crossing_cap_max=1.0)  # opt-in (junction.py)
 PLATE = dict(z0=0.7, gx=0.03, gy=-0.045)  # a tilted, offset plate (as in test_junction.py)
 
 
@@ -44,7 +45,7 @@ def test_bar_beyond_a_run_off_wins_over_it():
     """The run-off, measured against the dip past it, stands higher than the bar and won the
     highest-apex rule; with plate on both sides the bar is preferred (recall 81.8 → 90.9 %
     on 1205 flank glare in replay)."""
-    config = WeldConfig()
+    config = ON
     for seed in range(2):
         pts, valid = _flank_run_off(np.random.default_rng([seed, 33]))
         args = (jnp.asarray(pts), jnp.asarray(valid))
@@ -61,5 +62,5 @@ def test_bar_on_the_flank_still_found():
     h = np.maximum(np.where(x < 190.0, 1.2, 0.0), _bead_height(x - 190.0, 14.0, 2.0))
     rng = np.random.default_rng(7)
     pts = np.stack([x, y, _plate_z(x, y, PLATE) + h + rng.normal(0, 0.05, 480)], -1)
-    f = crossing(jnp.asarray(pts), jnp.asarray(rng.random(480) > 0.05), WeldConfig())
+    f = crossing(jnp.asarray(pts), jnp.asarray(rng.random(480) > 0.05), ON)
     assert bool(f.found) and abs(float(f.position) - 190.0) < 1.0, float(f.position)
